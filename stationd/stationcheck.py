@@ -78,10 +78,11 @@ def validate_station(path: str | Path, warn: Callable[[str], object] | None = No
                   *psets_only_errors(cfg.wrench.url, bolts)]
         if errors:
             raise errors[0]
-        if warn is not None:
+        if warn is not None:   # (the daemon's journal, at its start and every reload)
             unseen = _unseen_bolts_warning(cfg, bolts)
-            if unseen is not None:   # (the daemon's journal, at its start and every reload)
-                warn(str(unseen))
+            for warning in ([unseen] if unseen is not None else []) + \
+                    _references_near_bolts(cfg, bolts, read.sections):
+                warn(str(warning))
     return cfg
 
 
@@ -159,6 +160,8 @@ def check_station(path: str | Path, *, header: bool = True) -> StationCheck:
         warning = _unseen_bolts_warning(cfg, bolts)
         if warning is not None:
             warnings.append(warning)
+    if bolts is not None and bolts.table is not None:
+        warnings += _references_near_bolts(cfg, bolts, top)
     if cfg.bolts_path is None and not read.errors:
         # (a file with errors is read in part: a duplicated key drops its sections, and a
         # station read without its bolts: and database: lines would warn of what it has)
@@ -354,6 +357,48 @@ def _unseen_bolts_warning(cfg: StationConfig, bolts: BoltCheck) -> ConfigError |
         f"{'; '.join(said[:3])}{more}: seen by no registered pair (the wrench's marker, "
         f"{cfg.tool.length_mm:g} mm below the bolt with the wrench upright, is not in front "
         "of both cameras and inside both images): check the positions (vehicle frame, mm)"))
+
+
+def _references_near_bolts(cfg: StationConfig, bolts: BoltCheck,
+                           top: Mapping[str, YamlNode]) -> list[ConfigError]:
+    """A reference marker near where the wrench's marker is on a bolt (upright, ``tool``
+    below it): within ``exclusion_mm`` the wrench there is taken for the reference (refused
+    at that bolt); within the check's search window around it (its field's diagonal more),
+    the calibration check finds two markers while the wrench is on that bolt and waits (a
+    line engineer's trial: a reload with the wrench resting on B32 beside R4 kept B32
+    refused 34 s, "R4 ambiguous (2 markers around it)" every 10 s).  At the reference's
+    line; a warning: a tilted wrench, or a marker at another depth, differs (distances in
+    the vehicle frame, the window's corner counted)."""
+    refs, table = cfg.references, bolts.table
+    if refs is None or table is None or "references" not in top:
+        return []
+    try:
+        named = dict(top["references"].mapping(("markers", "tolerance_mm", "period_min"))
+                     ["markers"].named())
+    except (ConfigError, KeyError):
+        return []
+    below = np.array([*cfg.tool.offset_mm, cfg.tool.length_mm])
+    # the check's window is a square of this half-side around the reference: the wrench's
+    # rings inside its corner are a second marker there
+    half = cfg.marker.field_mm * np.sqrt(2.0) + refs.exclusion_mm
+    window = half * np.sqrt(2.0) + cfg.marker.outer_mm
+    out: list[ConfigError] = []
+    for r in refs.markers:
+        near = sorted((float(np.linalg.norm(np.asarray(b.position) - below
+                                            - np.asarray(r.position_mm))), b.bolt_id, m.name)
+                      for m in table.models for b in m.bolts)
+        d, bolt, model = near[0] if near else (np.inf, "", "")
+        if d >= window:
+            continue
+        said = (f"taken for {r.name} there, never for the wrench (within {refs.exclusion_mm:g} "
+                "mm of a reference a marker is the reference)" if d <= refs.exclusion_mm else
+                f"the calibration check finds two markers at {r.name} while the wrench is on "
+                f"{bolt} (its search reaches {window:.0f} mm), and waits")
+        message = (f"reference {r.name}: {d:.0f} mm from where the wrench's marker is on "
+                   f"{bolt} ({model}), upright: {said}; place it farther from the bolts")
+        node = named.get(r.name)
+        out.append(node.error(message) if node is not None else ConfigError(message))
+    return out
 
 
 def psets_only_errors(url: str, bolts: BoltCheck) -> list[ConfigError]:

@@ -651,6 +651,33 @@ def test_a_bolt_no_registered_pair_would_see_is_a_warning(sim_copy):
     assert told == [str(warning)]
 
 
+def test_a_reference_near_where_the_wrench_is_on_a_bolt_is_a_warning_at_its_line(tmp_path):
+    """A line engineer's trial: with the wrench resting on B32, R4 beside it read "ambiguous
+    (2 markers around it)" every 10 s and B32 stayed refused.  Said by the check and the
+    daemon's journal, at the reference's line: within the check's search the check waits;
+    within ``exclusion_mm`` the wrench there is taken for the reference."""
+    from tests.shell.refstation import REFERENCES, station_dir
+
+    station = station_dir(tmp_path)
+    said = [w for w in check_station(station).warnings if w.key == "references.markers.R4"]
+    assert [w.line for w in said] == [_line(station, "- 3250.0", 1)]   # its value (R3 first)
+    assert said[0].message.startswith("reference R4: 170 mm from where the wrench's marker is "
+                                      "on B32 (SIM-1), upright: the calibration check finds "
+                                      "two markers at R4 while the wrench is on B32")
+    told: list[str] = []
+    validate_station(station, told.append)
+    assert str(said[0]) in told
+    # R4 moved to 40 mm of B32's marker: the wrench on B32 would be taken for R4
+    moved = np.array([3098.0, 506.8, -71.1 - 300.0]) + np.array([40.0, 0.0, 0.0])
+    assert np.allclose(REFERENCES["pair4"][1], (3250.0, 480.0, -300.0))
+    text = station.read_text()
+    station.write_text(text.replace("- 3250.0\n    - 480.0\n    - -300.0",
+                                    "- {}\n    - {}\n    - {}".format(*moved)))
+    assert station.read_text() != text
+    [near] = [w for w in check_station(station).warnings if w.key == "references.markers.R4"]
+    assert "taken for R4 there, never for the wrench" in near.message
+
+
 @pytest.mark.parametrize(("old", "new", "key", "message"), [
     # a pair whose right image is its left camera's (one image triangulated with itself)
     ("right: pair1_right", "right: pair1_left", "pairs.pair1.right",

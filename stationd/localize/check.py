@@ -121,8 +121,11 @@ def measure_reference(cal: StereoPair, tv: Transform, left: np.ndarray, right: n
         found, reasons = detect_all(np.ascontiguousarray(img[y:y + h, x:x + w]), sub, vision,
                                     marker)
         if len(found) > 1:
+            # (what to do, said: a line engineer's trial read "R4 ambiguous (2 markers
+            # around it)" every 10 s while the wrench rested on the bolt beside it)
             return RefMeasure(ref.name, why=RefWhy.AMBIGUOUS,
-                              note=f"{len(found)} markers around it")
+                              note=f"{len(found)} markers around it: the wrench beside it? "
+                              "measured again once it is moved away")
         if not found:
             vision_refused = [r for r in reasons if r != NOTHING_IN_VIEW]
             if vision_refused:

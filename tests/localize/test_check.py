@@ -82,6 +82,8 @@ def test_the_wrench_beside_a_reference_makes_it_ambiguous_not_measured(in_place)
     c = _check(near)
     by = {m.name: m for m in c.measures}
     assert by["R2"].why is RefWhy.AMBIGUOUS and by["R1"].offset_mm is not None
+    assert by["R2"].note == ("2 markers around it: the wrench beside it? measured again once "
+                             "it is moved away")
     assert c.verdict is Verdict.OK and c.reference == "R1"
 
 

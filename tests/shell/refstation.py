@@ -2,8 +2,10 @@
 check's tests through the daemon.
 
 One reference per pair, fixed in the cell at the edge of that pair's view, 0.3 m under the
-vehicle (where the wrench's marker is): each is seen by one pair only and lies more than 190 mm
-from every bolt's marker, so the wrench is never taken for one.  ``pairs`` keeps only some of
+vehicle (where the wrench's marker is): each is seen by one pair only and lies more than 160 mm
+from every bolt's marker, so the wrench is never taken for one (R1 and R4 within the check's
+search of B41's and B32's: ``config check`` warns, and the check waits while the wrench is
+on those).  ``pairs`` keeps only some of
 the four pairs (fewer 20 MP cameras to render: a faster test); the bolt table is the
 simulator's own, so a bolt's pair is the one :meth:`stationd.sim.world.World.seen_by` names.
 """
