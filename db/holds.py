@@ -19,7 +19,7 @@ from db.kinds import (
     HELD_WITH_RESULT,
     HELD_WITHOUT_RESULT,
     NOT_TAKEN,
-    UNKNOWN_HELD,
+    UNKNOWN_TYPE_HELD,
     HeldUnder,
     not_taken_note,
     unknown_type_note,
@@ -93,12 +93,13 @@ def _stored(s: Session, vin: str, since: datetime | None) -> dict[str, _Stored]:
         n = n.where(ControllerEvent.recorded_at >= since)
     holds = [(str(b), _Stored(unreadable_note(tid, mid, rev), at, pset, True))
              for b, at, tid, mid, rev, pset in s.execute(q.order_by(UnreadableRecord.id))]
-    # an untyped OK came under the tightening pset, as did a result of an unknown type (no
-    # loosening by its type); a link cut's enable is looked up
+    # an untyped OK came under the tightening pset; what a result of an unknown type (it may
+    # be a loosening's, under a loosen pset: a review) and a link cut's enable came under is
+    # looked up
     holds += [(str(b), _Stored(not_taken_note(torque, tid), at, pset, False)
                if what == NOT_TAKEN else
-               _Stored(unknown_type_note(code, tid), at, pset, False)
-               if what == UNKNOWN_HELD else _Stored(note or CUT_UNKNOWN, at, pset, True))
+               _Stored(unknown_type_note(code, tid), at, pset, True)
+               if what == UNKNOWN_TYPE_HELD else _Stored(note or CUT_UNKNOWN, at, pset, True))
               for b, at, tid, torque, pset, what, note, code
               in s.execute(n.order_by(ControllerEvent.id))]
     return dict(sorted(holds, key=lambda h: h[1].at))

@@ -61,12 +61,12 @@ NOT_TAKEN_NOTE = "an OK result without a result type"
 #: never left open as if nothing was made (an MES's trial: the bolt left open, run down
 #: again): stored as a controller event under this name, its bolt held as for
 #: :data:`NOT_TAKEN`, published to an MES as a result not decided
-UNKNOWN_HELD = "unknown result type, bolt held"
+UNKNOWN_TYPE_HELD = "unknown result type, bolt held"
 #: how a held bolt's note begins for such a result
 UNKNOWN_TYPE_NOTE = "a result of a type the station does not know"
 #: the controller events that are a result an MES is sent and that hold their bolt: perhaps
 #: the bolt's tightening, not taken for one
-HELD_WITH_RESULT = (NOT_TAKEN, UNKNOWN_HELD)
+HELD_WITH_RESULT = (NOT_TAKEN, UNKNOWN_TYPE_HELD)
 #: a bolt locked by the NOK policy (``max_nok`` NOKs in a row), kept in the command ledger
 #: under this kind (user ``station``): the lock stands until a person releases or skips the
 #: bolt, whatever the policy says after a reload or a restart (a raised ``max_nok`` read back
@@ -260,7 +260,7 @@ __all__ = [
     "SKIPPED",
     "TIGHTENING",
     "TO_LOOSEN",
-    "UNKNOWN_HELD",
+    "UNKNOWN_TYPE_HELD",
     "UNKNOWN_TYPE_NOTE",
     "BoltStatus",
     "HeldUnder",

@@ -287,19 +287,12 @@ class Ledger:
         with self._session(False) as s:
             return int(s.scalar(select(func.max(FeedEntry.seq))) or 0)
 
-    def results_in(self, after: int, last: int | None = None,
-                   until: datetime | None = None) -> int:
-        """How many results (:func:`is_result`) the feed holds after ``after``, up to the
-        sequence number ``last`` and the time ``until`` (None: no bound): what a request
-        for them is told it gets."""
+    def results_in(self, after: int, last: int) -> int:
+        """How many results (:func:`is_result`) the feed holds after the sequence number
+        ``after`` up to ``last``: what a request for them is told it gets."""
         with self._session(False) as s:
-            q = select(func.count()).select_from(FeedEntry).where(FeedEntry.seq > after,
-                                                                  _results())
-            if last is not None:
-                q = q.where(FeedEntry.seq <= last)
-            if until is not None:
-                q = q.where(FeedEntry.at <= until)
-            return int(s.scalar(q) or 0)
+            return int(s.scalar(select(func.count()).select_from(FeedEntry).where(
+                FeedEntry.seq > after, FeedEntry.seq <= last, _results())) or 0)
 
     def since(self, seq: int, limit: int = FEED_LIMIT) -> list[dict[str, Any]]:
         """The feed after ``seq``, in order, each entry with its record (at most ``limit``)."""

@@ -539,7 +539,7 @@ _SAID: dict[Said, Callable[[Notice], str]] = {
                                f"{_mm(n.torque_min)}-{_mm(n.torque_max)} Nm (tightening "
                                f"{n.tightening_id}): not taken as a tightening; "
                                f"{CHECK_ON_CONTROLLER}"),
-    Said.UNKNOWN_HELD: lambda n: (f"{n.bolt}: result {n.tightening_id} of type "
+    Said.UNKNOWN_TYPE_HELD: lambda n: (f"{n.bolt}: result {n.tightening_id} of type "
                                   f"{n.result_type}, a type the station does not know: not "
                                   f"taken as a tightening; {CHECK_ON_CONTROLLER}"),
     Said.CUT_RECORDED: lambda n: (f"tightening {n.tightening_id} made during the link cut, "

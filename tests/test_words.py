@@ -104,7 +104,7 @@ WORDS = [
      "B1: an OK result without a result type, 0.0 Nm outside 20.0-25.0 Nm (tightening 7): "
      "not taken as a tightening; check it on the controller, then enter its outcome, or "
      "release it to tighten it again"),
-    (Notice(Said.UNKNOWN_HELD, bolt="B1", result_type=9, tightening_id=7),
+    (Notice(Said.UNKNOWN_TYPE_HELD, bolt="B1", result_type=9, tightening_id=7),
      "B1: result 7 of type 9, a type the station does not know: not taken as a tightening; "
      "check it on the controller, then enter its outcome, or release it to tighten it again"),
     (Notice(Said.CUT_RECORDED, tightening_id=41, bolt="B1"),
@@ -206,7 +206,7 @@ def test_a_notice_s_level_is_its_kind_s() -> None:
     assert errors == {Said.NOT_STORED}
     assert warnings == {
         Said.PAIR_DISTRUSTED, Said.IDS_AGAIN, Said.UNATTRIBUTED, Said.UNKNOWN_TYPE, Said.GAP,
-        Said.UNREADABLE, Said.HELD, Said.CUT_UNKNOWN, Said.NOT_TAKEN, Said.UNKNOWN_HELD,
+        Said.UNREADABLE, Said.HELD, Said.CUT_UNKNOWN, Said.NOT_TAKEN, Said.UNKNOWN_TYPE_HELD,
         Said.LOOSEN_PSET_TIGHTENED, Said.LOOSENING_NOK, Said.LOCKED, Said.NOK_AFTER_LOCK,
         Said.ENTERED_NOK, Said.ENTERED_LOOSENING_NOK, Said.OTHER_VIN}
     # a controller event is a warning only while a bolt is still open

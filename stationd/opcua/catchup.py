@@ -30,7 +30,7 @@ import asyncio
 import contextlib
 import logging
 from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from typing import Any
 
 from db.ledger import Series, is_result
@@ -127,15 +127,18 @@ class CatchUp:
         refused = self._refusal(repo)
         if refused is not None or repo is None:
             return [_duration(revised), *(refused or [])]
-        if first:
-            after, stop_seq, stop_at = first - 1, last, None
-        else:
-            after, stop_seq, stop_at = 0, None, t1
+        # a time range is the range of sequence numbers stored in it, fixed now, and what is
+        # counted is what is sent (a review: counted by time, sent until the first stored
+        # after ToTime, a clock stepped back told one more than came)
         try:
-            if t0 is not None and not first:
-                after = await _run(repo.ledger.seq_before, t0)
-            count = await _run(repo.ledger.results_in, after, stop_seq, stop_at)
             newest = await _run(repo.ledger.last_seq)
+            if first:
+                after, stop_seq = first - 1, last
+            else:
+                after = 0 if t0 is None else await _run(repo.ledger.seq_before, t0)
+                stop_seq = newest if t1 is None else await _run(
+                    repo.ledger.seq_before, t1 + timedelta(microseconds=1))
+            count = await _run(repo.ledger.results_in, after, stop_seq)
         except Exception as exc:   # a database busy or away: an answer, never a fault
             log.warning("OPC UA: reading the results feed: %s", exc)
             return [_duration(revised), *_status(
@@ -146,14 +149,14 @@ class CatchUp:
             return [_duration(revised), *_status(
                 OK, f"no result {what}: none is sent (the last sequence number so far: "
                 f"{newest})")]
-        self._spawn(self._send_feed(repo, after, stop_seq, stop_at, revised))
+        self._spawn(self._send_feed(repo, after, stop_seq, revised))
         sending = min(count, MAX_PER_REQUEST)
         return [_duration(revised), *_status(
             OK, f"{sending} of the {count} results {what} are sent as events (at most "
             f"{MAX_PER_REQUEST} per request: ask again after the last one received)")]
 
-    async def _send_feed(self, repo: Repository, after: int, stop_seq: int | None,
-                         stop_at: datetime | None, interval_ms: float) -> None:
+    async def _send_feed(self, repo: Repository, after: int, stop_seq: int,
+                         interval_ms: float) -> None:
         async def entries() -> AsyncIterator[dict[str, Any]]:
             cursor = after
             while True:
@@ -161,8 +164,7 @@ class CatchUp:
                 if not page:
                     return
                 for e in page:
-                    if (stop_seq is not None and e["seq"] > stop_seq) or \
-                            (stop_at is not None and datetime.fromisoformat(e["at"]) > stop_at):
+                    if e["seq"] > stop_seq:
                         return
                     cursor = e["seq"]
                     yield e

@@ -22,7 +22,7 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from typing import Any
 
-from db.kinds import UNKNOWN_HELD, message_words
+from db.kinds import UNKNOWN_TYPE_HELD, message_words
 from db.ledger import CONTROLLER_EVENT as CONTROLLER_EVENT_KIND
 from db.ledger import RUNDOWN as RUNDOWN_KIND
 from db.ledger import UNATTRIBUTED as UNATTRIBUTED_KIND
@@ -84,7 +84,7 @@ def other_message(kind: str, rec: dict[str, Any]) -> str:
     if kind == CONTROLLER_EVENT_KIND:    # not taken (:func:`not_taken_result`)
         bolt = rec.get("bolt")
         what = f"result of unknown type {rec.get('result_type')}" \
-            if rec.get("what") == UNKNOWN_HELD else "OK"
+            if rec.get("what") == UNKNOWN_TYPE_HELD else "OK"
         return f"{vin}{' ' + bolt if bolt else ''}: {what} not taken for a tightening{said}" + (
             ": held for a supervisor" if bolt else "")
     if kind == UNREADABLE_KIND:
@@ -400,7 +400,7 @@ def not_taken_result(db_id: str, entry: dict[str, Any], *, simulated: bool = Fal
     without a type whose torque lies outside its bolt's window (:data:`db.kinds.NOT_TAKEN`):
     perhaps no tightening at all (a batch increment or a bypass reads so at a revision
     without types), perhaps a real one with other limits on the controller; or a result of
-    a type the station does not know under a bolt's enable (:data:`db.kinds.UNKNOWN_HELD`).
+    a type the station does not know under a bolt's enable (:data:`db.kinds.UNKNOWN_TYPE_HELD`).
     Its evaluation NotDecidable (the controller's OK is not the station's: an MES reading OK
     for the joint would count it tightened), its values as sent, the bolt held for a
     supervisor as its joint.  Why published: an MES counting the controller's rundowns
@@ -410,7 +410,7 @@ def not_taken_result(db_id: str, entry: dict[str, Any], *, simulated: bool = Fal
     entities = _held_joint(rec, "the bolt the tool was enabled for: held for a supervisor")
     pset = "" if rec.get("pset") is None else f" of pset {rec['pset']}"
     what = f"a result of type {rec.get('result_type')}{pset}, a type the station does not " \
-        "know" if rec.get("what") == UNKNOWN_HELD else \
+        "know" if rec.get("what") == UNKNOWN_TYPE_HELD else \
         f"an OK without a result type{pset}, its torque outside {bolt or 'the bolt'}'s window"
     meta = _meta(
         db_id, entry, simulated=simulated, evaluation=EVALUATION_NOT_DECIDABLE,

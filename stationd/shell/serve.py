@@ -140,7 +140,10 @@ async def _reloaded(cfg_path: str, station: Station, screens: Screens,
     is never stopped for an invalid one."""
     loop = asyncio.get_running_loop()
     try:  # validate first: an invalid station never stops the running one
-        new = await loop.run_in_executor(None, validate_station, cfg_path, log.warning)
+        # (its warnings said once it is taken: a review found them said of a reload that was
+        # then refused, read as the new table running)
+        warnings: list[str] = []
+        new = await loop.run_in_executor(None, validate_station, cfg_path, warnings.append)
         changed = station.records.file_changed(new.database_url)
         if changed is FileChange.REMOVED:
             raise StationError(
@@ -165,6 +168,8 @@ async def _reloaded(cfg_path: str, station: Station, screens: Screens,
         await loop.run_in_executor(None, screens.check_move, new)
         if locks is not None:   # a device another daemon drives: refused
             hold_locks(locks, new)
+        for warning in warnings:
+            log.warning("reload: %s", warning)
         return new
     except StationError as exc:
         more = await loop.run_in_executor(None, more_errors, cfg_path)

@@ -603,11 +603,11 @@ class Said(enum.Enum):
     HELD = "held"                        # a bolt held: its result could not be read (bolt,
     #                                      note: which result)
     NOT_TAKEN = "not taken"              # an OK without a type outside the bolt's window
-    UNKNOWN_HELD = "unknown held"        # a result of a type the station does not know
-    #                                      under a bolt's enable: that bolt held (bolt,
-    #                                      result_type, tightening_id)
     #                                      (bolt, torque_nm, torque_min, torque_max,
     #                                      tightening_id)
+    UNKNOWN_TYPE_HELD = "unknown type held"  # a result of a type the station does not know
+    #                                          under a bolt's enable: that bolt held (bolt,
+    #                                          result_type, tightening_id)
     CUT_RECORDED = "cut recorded"        # made during a link cut, recorded to its bolt
     #                                      (tightening_id, bolt)
     CUT_NOTHING = "cut nothing"          # none made during the link cut: every result since
@@ -650,7 +650,7 @@ class Said(enum.Enum):
 #: the kinds the journal writes as warnings (NOT_STORED as an error; the others as info)
 _WARNINGS = frozenset({
     Said.PAIR_DISTRUSTED, Said.IDS_AGAIN, Said.UNATTRIBUTED, Said.UNKNOWN_TYPE, Said.GAP,
-    Said.UNREADABLE, Said.HELD, Said.CUT_UNKNOWN, Said.NOT_TAKEN, Said.UNKNOWN_HELD,
+    Said.UNREADABLE, Said.HELD, Said.CUT_UNKNOWN, Said.NOT_TAKEN, Said.UNKNOWN_TYPE_HELD,
     Said.LOOSEN_PSET_TIGHTENED,
     Said.LOOSENING_NOK, Said.LOCKED, Said.NOK_AFTER_LOCK, Said.ENTERED_NOK,
     Said.ENTERED_LOOSENING_NOK, Said.OTHER_VIN})

@@ -10,7 +10,7 @@ from db.kinds import (
     LOOSENING,
     NOT_TAKEN,
     TIGHTENING,
-    UNKNOWN_HELD,
+    UNKNOWN_TYPE_HELD,
     not_taken_note,
     other_pset_note,
     unknown_type_note,
@@ -184,11 +184,12 @@ class ResultRules(UnreadRules):
         kind = result_kind(type_code(r), en is not None and en.loosen)
         if kind is ResultKind.EVENT:
             return self._controller_event(ev, kind)
+        # (a type the station does not know: judged as a rundown is, for whose enable it may
+        # answer: that bolt held, never closed (:meth:`_not_taken`), and the bolts it may be
+        # of held as for a rundown; stored as a controller event, never as a rundown of no
+        # bolt)
         unknown = kind is ResultKind.UNKNOWN
-        # (a type the station does not know: judged as a rundown would be for whose enable
-        # it answers, that bolt held (:meth:`_not_taken`); answering none, a controller
-        # event as any other)
-        read = None if unknown else self._unread_read(ev, tid)
+        read = self._unread_read(ev, tid)
         if read is not None:
             return read
         # (made before the enable owed now, by the order of ids or its own time: never its;
@@ -206,10 +207,6 @@ class ResultRules(UnreadRules):
             return self._attribute(ev, en)
         if en is not None and not before and self._made_under(ev, en):
             return self._attribute(ev, en, lost=True)
-        if unknown:
-            proved, _ = self._made_during_cut(ev)
-            return self._controller_event(ev, kind) if proved is None \
-                else self._attribute(ev, proved, cut=True)
         if en is not None and not before and self._of_another_pset(ev, en):
             return self._other_pset(ev, en)
         proved, not_proved = self._made_during_cut(ev)
@@ -227,11 +224,12 @@ class ResultRules(UnreadRules):
         # result of its last bolt, its push lost, was filed under the next car)
         vins = {u.selection.vin for u in lost}
         filed = vins.pop() if len(vins) == 1 else self.vin
-        return [StoreUnattributed(r, filed, why),
-                Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
-                Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid, pset=int(r.pset),
-                               unattributed=why, t=ev.t)),
-                *self._cut_in_doubt(ev), *self._lost_in_doubt(ev, lost),
+        stored = self._controller_event(ev, kind) if unknown else [
+            StoreUnattributed(r, filed, why),
+            Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
+            Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid, pset=int(r.pset),
+                           unattributed=why, t=ev.t))]
+        return [*stored, *self._cut_in_doubt(ev), *self._lost_in_doubt(ev, lost),
                 *self._fetched_in_doubt(ev), *self._late_cut_in_doubt(ev),
                 *self._loosened_after_cut(ev, kind)]
 
@@ -290,15 +288,22 @@ class ResultRules(UnreadRules):
         (an integrator's trial: the tool stayed on, the bolt was run down again and closed OK,
         the other program's rundown in no bolt's history).  Stored naming the bolt, the tool
         off, the bolt held for a person who checks it on the controller (released, or its
-        outcome entered); the enable owes nothing more."""
+        outcome entered); the enable owes nothing more.  One of a type the station does not
+        know is stored as a controller event naming the bolt (a review: left as a controller
+        event, the tool on, where a known type held the bolt)."""
         r, tid = ev.result, int(ev.result.tightening_id)
         self._recorded[tid] = _said(r)
         why = Unattributed(UnattributedKind.OTHER_PSET, tid, int(r.pset), bolt=en.bolt)
         since = self._enabled_at if self._enabled_at is not None else ev.t
-        acts: list[Action] = [StoreUnattributed(r, en.vin, why),
-                              Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
-                              Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid,
-                                             pset=int(r.pset), unattributed=why, t=ev.t))]
+        acts: list[Action] = [
+            StoreControllerEvent(r, en.vin, en.bolt),
+            Publish(ControllerResultEvent(type_code(r) or 0, "", tid, int(r.pset), bool(r.ok),
+                                          en.bolt, t=ev.t))] \
+            if result_kind(type_code(r)) is ResultKind.UNKNOWN else [
+            StoreUnattributed(r, en.vin, why),
+            Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
+            Publish(Notice(Said.UNATTRIBUTED, tightening_id=tid, pset=int(r.pset),
+                           unattributed=why, t=ev.t))]
         return acts + self._hold_enable(ev.t, en, since, lambda u: other_pset_note(
             tid, int(r.pset), int(en.pset or 0)), tid)
 
@@ -460,8 +465,8 @@ class ResultRules(UnreadRules):
         self._recorded[tid] = _said(r)
         if window is None:
             code = type_code(r)
-            what, note = UNKNOWN_HELD, unknown_type_note(code, tid)
-            said = Notice(Said.UNKNOWN_HELD, bolt=en.bolt, result_type=code,
+            what, note = UNKNOWN_TYPE_HELD, unknown_type_note(code, tid)
+            said = Notice(Said.UNKNOWN_TYPE_HELD, bolt=en.bolt, result_type=code,
                           tightening_id=tid, t=ev.t)
             reason = StateReason(Because.NOT_TAKEN, bolt=en.bolt, note=note)
             held = StateReason(Because.NOT_TAKEN_HELD, bolt=en.bolt, note=note)
@@ -481,7 +486,10 @@ class ResultRules(UnreadRules):
         self._answered(en)
         self._not_before = max(self._not_before, ev.t)
         if self.matcher is not None and self.vin == en.vin and en.bolt in self.matcher.bolts:
-            acts += self._hold(ev.t, en.bolt, note, said)
+            # (under its enable: one of a loosen pset is a loosening's hold, an outcome
+            # entered for it a loosening's: a review found an entered OK closing a bolt that
+            # was only loosened)
+            acts += self._hold(ev.t, en.bolt, note, said, under=en)
         else:
             acts.append(Publish(said))
         if self.bolt == en.bolt and self.vin == en.vin:

@@ -19,7 +19,7 @@ from db.kinds import (
     LOOSENING,
     NOT_TAKEN,
     TIGHTENING,
-    UNKNOWN_HELD,
+    UNKNOWN_TYPE_HELD,
     HeldUnder,
     is_not_taken_note,
     not_taken_note,
@@ -166,7 +166,7 @@ def test_a_result_of_an_unknown_type_holds_its_bolt_over_a_restart_until_entered
     enable = repo.enables.note("VIN1", "B1", 1, version, {"operator": "olga"},
                                datetime.now(UTC))
     assert repo.others.record_controller_event(
-        result_type=9, what=UNKNOWN_HELD, vin="VIN1", bolt="B1", controller_vin=None,
+        result_type=9, what=UNKNOWN_TYPE_HELD, vin="VIN1", bolt="B1", controller_vin=None,
         tightening_id=41, pset=1, ok=True, torque_nm=49.4, angle_deg=30.0, result_at=None,
         enable_id=enable)
     assert repo.enables.owed() is None
@@ -179,6 +179,13 @@ def test_a_result_of_an_unknown_type_holds_its_bolt_over_a_restart_until_entered
     _enter(repo)
     assert repo.held_bolts("VIN1") == {}
     assert repo.ledger.since(0)[-1]["record"]["tightening_id"] == 41
+    # one under B2's loosen pset comes back after a restart as a loosening's hold (a review:
+    # taken for a tightening's, an OK entered closed a bolt only loosened)
+    repo.enables.note("VIN1", "B2", 90, version, {"loosen": True}, datetime.now(UTC))
+    repo.others.record_controller_event(
+        result_type=9, what=UNKNOWN_TYPE_HELD, vin="VIN1", bolt="B2", controller_vin=None,
+        tightening_id=42, pset=90, ok=True, torque_nm=8.0, angle_deg=400.0, result_at=None)
+    assert repo.holds("VIN1")["B2"][1] == HeldUnder(True, 90)
 
 
 # -- an outcome entered for a held loosening: a loosening in the records --------------------------

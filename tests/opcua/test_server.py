@@ -549,7 +549,7 @@ def test_a_result_of_an_unknown_type_that_held_its_bolt_arrives_as_a_result_not_
     integrator's trial found such rundowns in the export and not on OPC UA, GetResultById
     answering "not found"): it holds its bolt and comes as a result, NotDecidable, its type
     said; one with no bolt's enable (a plain controller event) does not come."""
-    from db.kinds import UNKNOWN_HELD
+    from db.kinds import UNKNOWN_TYPE_HELD
 
     def event(what: str, tid: int, bolt: str | None) -> Callable[[], Any]:
         return lambda: repo.others.record_controller_event(
@@ -558,7 +558,7 @@ def test_a_result_of_an_unknown_type_that_held_its_bolt_arrives_as_a_result_not_
             result_at=None)
 
     events = events_while(repo, event("result type 9 (unknown)", 70, None),
-                          event(UNKNOWN_HELD, 71, "B2"),
+                          event(UNKNOWN_TYPE_HELD, 71, "B2"),
                           lambda: record(repo, VIN, "B1", ok=True, tightening_id=72),
                           events=2)
     assert [e.Message.Text for e in events] == [

@@ -11,7 +11,7 @@ from typing import Any
 
 import pytest
 
-from db.kinds import CUT_UNKNOWN, NOT_TAKEN, UNKNOWN_HELD
+from db.kinds import CUT_UNKNOWN, NOT_TAKEN, UNKNOWN_TYPE_HELD
 from db.repository import Repository
 from drivers.keeper import Backoff
 from drivers.wrench.sim.controller import SimController
@@ -63,7 +63,7 @@ def test_only_a_tightening_closes_the_bolt_the_tool_is_on(tmp_path):
     assert events == [*((c, t, "B05", vin) for c, t in zip(codes, made, strict=True)),
                       (9, odd.tightening_id, "B05", vin), (3, lead.tightening_id, None, vin)]
     assert _rows(db, "SELECT what FROM controller_events WHERE result_type = 9") == [
-        (UNKNOWN_HELD,)]
+        (UNKNOWN_TYPE_HELD,)]
     rundowns = _rows(db, "SELECT tightening_id, kind FROM tightening_records")
     assert rundowns == [(real.tightening_id, "tightening")]
     assert _rows(db, "SELECT count(*) FROM unattributed_results") == [(0,)]

@@ -332,6 +332,25 @@ def test_an_ok_entered_for_a_held_loosening_loosens_the_bolt_never_closes_it():
     assert "B1" in m.done and "B1" not in d.core._noks
 
 
+def test_a_result_of_an_unknown_type_under_the_loosen_pset_is_a_loosening_s_hold():
+    """A review: a result of type 9 under B1's loosen pset held B1 as a tightening's, and an
+    OK entered for it closed B1, only loosened, as tightened.  Held under its enable: the OK
+    entered is a loosening, B1 not done."""
+    d = _ready(nok=LOOSEN)
+    _rundown(d, 1, 1, ok=False)
+    sent = _enabled(d)
+    assert sent.loosen and sent.selection.pset == 90
+    acts = d.feed(ResultIn(d.t, res(2, 90, True, 9)))
+    [lock] = published(acts, BoltLocked)
+    assert lock.held == ("a result of a type the station does not know (type 9, tightening 2), "
+                         "a loosening with loosen pset 90")
+    acts = d.command(1, EnterOutcome("VIN1", "B1", True, 8.0, 400.0, "controller: OK"),
+                     SUPERVISOR)
+    [rec] = published(acts, ResultRecorded)
+    assert (rec.bolt, rec.ok, rec.kind, rec.pset) == ("B1", True, LOOSENING, 90)
+    assert "B1" not in d.core.matcher.done
+
+
 def test_a_nok_entered_for_a_held_loosening_counts_as_a_loosening_nok():
     d = _ready(nok=LOOSEN)
     _held_loosening(d)
