@@ -5,6 +5,7 @@ acknowledgements kept in the station's database across a restart of the server."
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Awaitable, Callable
 from datetime import UTC, datetime, timedelta
 from typing import Any
 
@@ -42,6 +43,23 @@ async def serving_ready(cfg: OpcUaConfig, repo: Repository) -> Any:
     while srv.catchup.repo is None or srv.cursor < repo.ledger.last_seq():
         await asyncio.sleep(0.05)
     return srv, stop, task
+
+
+def _asked(repo: Repository, body: Callable[[Mes, dict[str, Any]], Awaitable[None]]
+           ) -> dict[str, Any]:
+    """``body`` run as an MES's session on the station's server (the results recorded so
+    far published first): what it put in its ``out``."""
+    async def scenario() -> dict[str, Any]:
+        srv, stop, task = await serving_ready(config(), repo)
+        out: dict[str, Any] = {}
+        try:
+            async with Client(srv.url) as client:
+                await body(await Mes(client).open(), out)
+        finally:
+            await stopping(srv, stop, task)
+        return out
+
+    return asyncio.run(scenario())
 
 
 def _record(repo: Repository, n: int) -> None:
@@ -168,27 +186,19 @@ def test_request_results_by_time_and_a_paced_range(repo):
     _record(repo, 6)
     seqs = [e["seq"] for e in repo.ledger.since(0) if e["kind"] == "rundown"]
 
-    async def scenario() -> dict[str, Any]:
-        srv, stop, task = await serving_ready(config(), repo)
-        out: dict[str, Any] = {}
-        try:
-            async with Client(srv.url) as client:
-                mes = await Mes(client).open()
-                now = datetime.now(UTC)
-                out["future"] = await mes.request_results(0, 0, t0=now + timedelta(hours=1))
-                out["time"] = await mes.request_results(0, 0, t0=now - timedelta(hours=1),
-                                                        t1=now + timedelta(minutes=1))
-                out["by_time"] = list(await mes.wait_requested(6))
-                mes.events.events.clear()
-                started = asyncio.get_running_loop().time()
-                out["paced"] = await mes.request_results(seqs[1], seqs[3], interval_ms=100.0)
-                out["range"] = await mes.wait_requested(3)
-                out["took"] = asyncio.get_running_loop().time() - started
-        finally:
-            await stopping(srv, stop, task)
-        return out
+    async def body(mes: Mes, out: dict[str, Any]) -> None:
+        now = datetime.now(UTC)
+        out["future"] = await mes.request_results(0, 0, t0=now + timedelta(hours=1))
+        out["time"] = await mes.request_results(0, 0, t0=now - timedelta(hours=1),
+                                                t1=now + timedelta(minutes=1))
+        out["by_time"] = list(await mes.wait_requested(6))
+        mes.events.events.clear()
+        started = asyncio.get_running_loop().time()
+        out["paced"] = await mes.request_results(seqs[1], seqs[3], interval_ms=100.0)
+        out["range"] = await mes.wait_requested(3)
+        out["took"] = asyncio.get_running_loop().time() - started
 
-    out = asyncio.run(scenario())
+    out = _asked(repo, body)
     assert out["future"][1] == OK
     assert out["by_time"] == seqs          # the future range sent nothing
     assert out["paced"][0] == pytest.approx(100.0)
@@ -206,33 +216,25 @@ def test_a_request_says_how_many_results_it_sends_and_arguments_are_counted(repo
     _record(repo, 3)
     seqs = [e["seq"] for e in repo.ledger.since(0) if e["kind"] == "rundown"]
 
-    async def scenario() -> dict[str, Any]:
-        srv, stop, task = await serving_ready(config(), repo)
-        out: dict[str, Any] = {}
-        try:
-            async with Client(srv.url) as client:
-                mes = await Mes(client).open()
-                out["past"] = await mes.request_results(10**8, 10**8)
-                out["two"] = await mes.request_results(seqs[1], 10**6)
-                out["sent"] = await mes.wait_requested(2)
-                calls: dict[str, tuple[Any, ...]] = {
-                         "none": (f"{mes.ijt}:RequestResults",),
-                         "by id alone": (f"{mes.mr}:GetResultById", "x:1"),
-                         "by id and more": (f"{mes.mr}:GetResultById", "x:1",
-                                            ua.Variant(0, ua.VariantType.Int32), 7)}
-                for name, (method, *args) in calls.items():
-                    try:
-                        await mes.rm.call_method(str(method), *args)
-                        out[name] = "Good"
-                    except ua.UaStatusCodeError as exc:
-                        out[name] = type(exc).__name__
-                await asyncio.sleep(0.5)
-                out["after"] = mes.requested()
-        finally:
-            await stopping(srv, stop, task)
-        return out
+    async def body(mes: Mes, out: dict[str, Any]) -> None:
+        out["past"] = await mes.request_results(10**8, 10**8)
+        out["two"] = await mes.request_results(seqs[1], 10**6)
+        out["sent"] = await mes.wait_requested(2)
+        calls: dict[str, tuple[Any, ...]] = {
+            "none": (f"{mes.ijt}:RequestResults",),
+            "by id alone": (f"{mes.mr}:GetResultById", "x:1"),
+            "by id and more": (f"{mes.mr}:GetResultById", "x:1",
+                               ua.Variant(0, ua.VariantType.Int32), 7)}
+        for name, (method, *args) in calls.items():
+            try:
+                await mes.rm.call_method(str(method), *args)
+                out[name] = "Good"
+            except ua.UaStatusCodeError as exc:
+                out[name] = type(exc).__name__
+        await asyncio.sleep(0.5)
+        out["after"] = mes.requested()
 
-    out = asyncio.run(scenario())
+    out = _asked(repo, body)
     last = repo.ledger.last_seq()
     assert out["past"][1] == OK and out["past"][2].Text == (
         f"no result with sequence numbers {10**8} to {10**8}: none is sent (the last "
