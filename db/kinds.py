@@ -61,7 +61,7 @@ NOT_TAKEN_NOTE = "an OK result without a result type"
 #: never left open as if nothing was made (an MES's trial: the bolt left open, run down
 #: again): stored as a controller event under this name, its bolt held as for
 #: :data:`NOT_TAKEN`, published to an MES as a result not decided
-UNKNOWN_TYPE_HELD = "unknown result type, bolt held"
+UNKNOWN_TYPE_HELD = "unknown result type, not taken"
 #: how a held bolt's note begins for such a result
 UNKNOWN_TYPE_NOTE = "a result of a type the station does not know"
 #: the controller events that are a result an MES is sent and that hold their bolt: perhaps

@@ -502,7 +502,10 @@ def cmd_db_report(args: argparse.Namespace) -> int:
                       f"{e['note']}{_held_now(e['bolt'], holds, e['note'] or '', '; ')}")
                 continue
             on = f" while the tool was on {e['bolt']}" if e["bolt"] else ""
-            code = "" if "type" in e["what"] else f" (type {e['result_type']})"
+            # (its type's code unless its words say it: an auditor's trial found the 9 of a
+            # result of an unknown type said nowhere, its words "unknown result type")
+            code = "" if f"type {e['result_type']}" in e["what"] \
+                else f" (type {e['result_type']})"
             print(f"  controller event: {e['what']}{code}, tightening "
                   f"{e['tightening_id']} pset {e['pset']}{on}: not a rundown")
         for x in unread:

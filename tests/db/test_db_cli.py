@@ -758,6 +758,26 @@ def test_a_table_without_models_is_not_imported_and_an_idle_one_is_warned(run, d
     assert code == 0 and "warning:" in err and "tightens nothing" in err
 
 
+def test_report_says_the_type_of_a_result_of_an_unknown_type(run, db):
+    """An auditor's trial: a result of type 9 that held its bolt read "controller event:
+    unknown result type, bolt held, tightening 3" in the report: its type said nowhere, and
+    "held" after the outcome was entered.  Its code said; its words not "held"."""
+    from db.kinds import UNKNOWN_TYPE_HELD
+    from db.repository import Repository
+
+    run("db", "import", EXAMPLE, "--db", db)
+    with Repository.open(db) as repo:
+        repo.start_vehicle("VIN1", "WAGON-B")
+        repo.others.record_controller_event(
+            result_type=9, what=UNKNOWN_TYPE_HELD, vin="VIN1", bolt="SF-FR",
+            controller_vin=None, tightening_id=3, pset=1, ok=True, torque_nm=49.4,
+            angle_deg=30.0, result_at=None)
+    code, out, _ = run("db", "report", "VIN1", "--db", db)
+    assert code == 1        # SF-FR held: the vehicle not complete
+    assert ("controller event: unknown result type, not taken (type 9), tightening 3 pset 1 "
+            "while the tool was on SF-FR: not a rundown") in out
+
+
 def test_report_shows_controller_events_and_unreadable_results(run, db, tmp_path):
     from db.kinds import CUT_UNKNOWN, LOCK
     from db.repository import Repository
