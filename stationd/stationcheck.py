@@ -64,8 +64,9 @@ def validate_station(path: str | Path, warn: Callable[[str], object] | None = No
     NOK policy against that table (an override no table has is refused: at a reload, the
     running station is kept), and its bolts against its controller (a bolt without a pset on
     one that selects psets only).  Raises the first error (one line, file and key).
-    ``warn``: told of bolts no pair sees (the daemon's journal: a line engineer's reload
-    said only "B51 added", and B51 was missing on every vehicle after it)."""
+    ``warn``: told of bolts no pair sees and of references beside a bolt's marker (the
+    daemon's journal: a line engineer's reload said only "B51 added", and B51 was missing on
+    every vehicle after it)."""
     from stationd.boltfile import check_bolts
 
     read = read_station(path, station=True)
