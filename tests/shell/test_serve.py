@@ -63,6 +63,18 @@ def test_ready_reload_refused_and_clean_stop(tmp_path):
         reloading = [m for m in got if "RELOADING=1" in m]
         assert len(reloading) == 1 and "MONOTONIC_USEC=" in reloading[0], got
         assert not any("STOPPING=1" in m for m in got), got
+        # a bolt no pair sees (typed in metres): a reload taken says it; the same file in a
+        # reload then refused (its database file removed) does not (a review: said before
+        # the refusal, it read as the new table running)
+        bolts = tmp_path / "bolts.yaml"
+        bolts.write_text(bolts.read_text().replace("[1489.8, -529.3, -44.3]",
+                                                   "[1.4898, -0.5293, -0.0443]"))
+        p.send_signal(signal.SIGHUP)
+        _recv_until(sock, "READY=1", 90)
+        (tmp_path / "stationd-sim.db").unlink()
+        p.send_signal(signal.SIGHUP)
+        _recv_until(sock, "reload refused", 60)
+        assert p.poll() is None
         p.send_signal(signal.SIGTERM)
         _recv_until(sock, "STOPPING=1", 60)
         assert p.wait(timeout=60) == 0
@@ -75,6 +87,9 @@ def test_ready_reload_refused_and_clean_stop(tmp_path):
         in err
     assert "configuration reloaded" in err
     assert "bolts.yaml: cannot be reached (file name too long)" in err
+    assert err.count("seen by no registered pair") == 1
+    assert "reload: " in err.split("seen by no registered pair")[0].splitlines()[-1]
+    assert "was removed while the daemon ran" in err
     assert "Traceback" not in err
     # one readable line per event (the unreachable bolt table's is as long as its name)
     assert all(len(line) < 400 or "a" * 300 in line for line in err.splitlines())
