@@ -295,10 +295,7 @@ class ResultRules(UnreadRules):
         self._recorded[tid] = _said(r)
         why = Unattributed(UnattributedKind.OTHER_PSET, tid, int(r.pset), bolt=en.bolt)
         since = self._enabled_at if self._enabled_at is not None else ev.t
-        acts: list[Action] = [
-            StoreControllerEvent(r, en.vin, en.bolt),
-            Publish(ControllerResultEvent(type_code(r) or 0, "", tid, int(r.pset), bool(r.ok),
-                                          en.bolt, t=ev.t))] \
+        acts: list[Action] = self._controller_event(ev, ResultKind.UNKNOWN, en) \
             if result_kind(type_code(r)) is ResultKind.UNKNOWN else [
             StoreUnattributed(r, en.vin, why),
             Publish(ResultUnattributed(tid, int(r.pset), bool(r.ok), t=ev.t)),
@@ -330,21 +327,28 @@ class ResultRules(UnreadRules):
                                        f"the link cut after its rundown {after}, may have "
                                        "loosened it", cut)
 
-    def _controller_event(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
+    def _controller_event(self, ev: ResultIn, kind: ResultKind,
+                          held: Selection | None = None) -> list[Action]:
         """A result that is not a tightening or a loosening (a batch increment a line lead
         pressed, a bypassed pset, an aborted job, a reference setup, or a type the station
         does not know): stored as a controller event, said, and nothing else: no bolt is
-        closed, opened or counted, and the tool stays as the station decided."""
+        closed, opened or counted, and the tool stays as the station decided.  ``held``: the
+        enable whose bolt the caller holds for it (:meth:`_other_pset`): stored naming that
+        bolt, said by its hold."""
         r, code = ev.result, type_code(ev.result)
         self._recorded[int(r.tightening_id)] = _said(r)
-        bolt = self.bolt if self.tool_on else None
+        vin, bolt = (held.vin, held.bolt) if held is not None \
+            else (self.vin, self.bolt if self.tool_on else None)
         said = Said.UNKNOWN_TYPE if kind is ResultKind.UNKNOWN else Said.CONTROLLER_EVENT
         # named by its type code: the type's name in words is written by the shell (stored,
         # published: stationd.words.result_type_words), never built here
-        return [StoreControllerEvent(r, self.vin, bolt),
-                Publish(ControllerResultEvent(code or 0, "", int(r.tightening_id),
-                                              int(r.pset), bool(r.ok), bolt, t=ev.t)),
-                Publish(Notice(said, bolt=bolt, result_type=code, t=ev.t))]
+        acts: list[Action] = [
+            StoreControllerEvent(r, vin, bolt),
+            Publish(ControllerResultEvent(code or 0, "", int(r.tightening_id), int(r.pset),
+                                          bool(r.ok), bolt, t=ev.t))]
+        if held is None:
+            acts.append(Publish(Notice(said, bolt=bolt, result_type=code, t=ev.t)))
+        return acts
 
     def _on_written(self, ev: Written) -> list[Action]:
         """A result on disk: published for the screens, then the controller may forget it.

@@ -20,14 +20,10 @@ from sqlalchemy import Engine, create_engine, make_url
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.pool import NullPool
 
-from stationd.linedb import LINE_FEED, LINE_RUNDOWNS, LineResult, results
+from stationd.linedb import LINE_FEED, LINE_RUNDOWNS, results
 
 PAGE = Path(__file__).with_name("static") / "line.html"
 LIMIT = (1, 1000)
-
-
-def _plain(r: LineResult) -> dict[str, Any]:
-    return r.to_json()
 
 
 class NotUpgraded(Exception):  # noqa: N818 - a state of the line database
@@ -62,7 +58,7 @@ class LineRoutes:
                 if engine.dialect.has_table(c, LINE_FEED.name):
                     raise NotUpgraded
                 return []      # nothing forwarded to it yet
-        return [_plain(r) for r in results(engine, vin=vin, station=station, bolt=bolt,
+        return [r.to_json() for r in results(engine, vin=vin, station=station, bolt=bolt,
                                            limit=limit)]
 
     async def _results(self, request: web.Request) -> web.Response:
