@@ -27,6 +27,8 @@ from drivers.errors import DriverError
 from drivers.wrench import takes_targets
 from stationd.config import STATE_DIRECTORY, StationConfig, read_all, read_station
 from stationd.errors import ConfigError, InputError
+from stationd.geometry.tool import marker_upright
+from stationd.localize.references import REFERENCES_KEYS
 from stationd.station.policy import table_errors
 from stationd.yamlio import YamlNode
 
@@ -346,9 +348,8 @@ def _unseen_bolts_warning(cfg: StationConfig, bolts: BoltCheck) -> ConfigError |
              if p.to_vehicle is not None]
     if table is None or not pairs or len(pairs) < len(cfg.pairs):
         return None     # a pair not registered yet (warned of) may be the one that sees it
-    below = np.array([*cfg.tool.offset_mm, cfg.tool.length_mm])
     unseen = [(m.name, b) for m in table.models for b in m.bolts
-              if not any(project(cal, tv, np.asarray(b.position) - below, cfg.marker)
+              if not any(project(cal, tv, marker_upright(b.position, cfg.tool), cfg.marker)
                          is not None for cal, tv in pairs)]
     if not unseen:
         return None
@@ -374,21 +375,19 @@ def _references_near_bolts(cfg: StationConfig, bolts: BoltCheck,
     if refs is None or table is None or "references" not in top:
         return []
     try:
-        named = dict(top["references"].mapping(("markers", "tolerance_mm", "period_min"))
-                     ["markers"].named())
+        named = dict(top["references"].mapping(REFERENCES_KEYS)["markers"].named())
     except (ConfigError, KeyError):
         return []
-    below = np.array([*cfg.tool.offset_mm, cfg.tool.length_mm])
     # the check's window is a square of this half-side around the reference: the wrench's
     # rings inside its corner are a second marker there
     half = cfg.marker.field_mm * np.sqrt(2.0) + refs.exclusion_mm
     window = half * np.sqrt(2.0) + cfg.marker.outer_mm
     out: list[ConfigError] = []
     for r in refs.markers:
-        near = sorted((float(np.linalg.norm(np.asarray(b.position) - below
-                                            - np.asarray(r.position_mm))), b.bolt_id, m.name)
-                      for m in table.models for b in m.bolts)
-        d, bolt, model = near[0] if near else (np.inf, "", "")
+        d, bolt, model = min(((float(np.linalg.norm(marker_upright(b.position, cfg.tool)
+                                                    - np.asarray(r.position_mm))),
+                               b.bolt_id, m.name) for m in table.models for b in m.bolts),
+                             default=(np.inf, "", ""))
         if d >= window:
             continue
         said = (f"taken for {r.name} there, never for the wrench (within {refs.exclusion_mm:g} "

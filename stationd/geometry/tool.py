@@ -12,6 +12,7 @@ perpendicular``) for comparison.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -85,6 +86,16 @@ class BoltEnd:
     point_mm: np.ndarray  # vehicle frame
     tilt_deg: float       # wrench axis vs the vehicle's up axis
     axis: np.ndarray      # unit, from the marker towards the socket tip
+
+
+def marker_upright(bolt_mm: Sequence[float], tool: ToolGeometry
+                   ) -> tuple[float, float, float]:
+    """Where the wrench's marker centre is with the wrench upright on the bolt at
+    ``bolt_mm`` (vehicle frame, up +z): :func:`bolt_end` of an upright wrench, inverted.
+    What the station's files are checked against (a bolt no pair sees, a reference marker
+    beside one)."""
+    x, y, z = (float(v) for v in bolt_mm)
+    return x - tool.offset_mm[0], y - tool.offset_mm[1], z - tool.length_mm
 
 
 def bolt_end(centre_mm: np.ndarray, normal: np.ndarray, tool: ToolGeometry,

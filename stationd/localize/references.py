@@ -43,6 +43,8 @@ from stationd.vision.marker import MarkerSpec
 from stationd.yamlio import YamlNode
 
 #: a reference's coordinates beyond this (mm) are a typo or another unit: no cell is 20 m wide
+#: the keys of the station file's ``references:`` section
+REFERENCES_KEYS = ("markers", "tolerance_mm", "period_min")
 MAX_COORD_MM = 10_000.0
 #: the idle check's period bounds, minutes (0.5: a test station; a day at most)
 PERIOD_MIN = (0.5, 1440.0)
@@ -99,7 +101,7 @@ class References:
         """Read the section; ``pairs``: each pair's calibration and registration (a pair not
         registered yet sees nothing); ``registering``: the pair being registered now
         (``calibrate vehicle``), whose registration is read as none."""
-        m = node.mapping(("markers", "tolerance_mm", "period_min"), required=("markers",))
+        m = node.mapping(REFERENCES_KEYS, required=("markers",))
         default_tol = matching_tolerance_mm / 4.0
         top = matching_tolerance_mm / 2.0
         tol = default_tol
@@ -214,4 +216,4 @@ def exclusions(cal: StereoPair, tv: Transform | None, refs: Sequence[Reference],
     return tuple(left), tuple(right)
 
 
-__all__ = ["Reference", "References", "exclusions", "in_pair", "project"]
+__all__ = ["REFERENCES_KEYS", "Reference", "References", "exclusions", "in_pair", "project"]

@@ -416,7 +416,7 @@ class OpcUaServer:
         for name, cb in (("GetLatestResult", self._get_latest),
                          ("GetResultById", self._get_by_id)):
             node = await rm.get_child([f"{mr}:{name}"])
-            server.link_method(node, _counted(cb, len(await _inputs(node))))
+            server.link_method(node, _counted(cb, len(await _arguments(node))))
         for declared, cb in ((ua.NodeId(REQUEST_RESULTS, ijt), self.catchup.request_results),
                              (ua.NodeId(REQUEST_UNACKNOWLEDGED, ijt),
                               self.catchup.request_unacknowledged),
@@ -675,15 +675,15 @@ async def _add_declared_method(server: Server, parent: Node, prefix: tuple[str, 
     arguments its declaration has, calling ``callback``."""
     decl = server.get_node(declared)
     name = await decl.read_browse_name()
-    inputs, outputs = await _inputs(decl), await _inputs(decl, "OutputArguments")
+    inputs, outputs = await _arguments(decl), await _arguments(decl, "OutputArguments")
     nodeid = ua.NodeId(f"{prefix[0]}.{name.Name}", prefix[1])
     return await parent.add_method(nodeid, name, _counted(callback, len(inputs)), inputs,
                                    outputs)
 
 
-async def _inputs(method: Node, prop: str = "InputArguments") -> list[Any]:
-    """The arguments a method declares (``prop``: its inputs, or its outputs); none where
-    it has no such property."""
+async def _arguments(method: Node, prop: str = "InputArguments") -> list[Any]:
+    """The arguments a method declares (``prop``: its inputs, or ``OutputArguments``); none
+    where it has no such property."""
     try:
         return list(await (await method.get_child([f"0:{prop}"])).read_value())
     except ua.UaError:
