@@ -418,7 +418,7 @@ def not_taken_result(db_id: str, entry: dict[str, Any], *, simulated: bool = Fal
         name=f"{rec.get('vin') or 'no vehicle'}{' ' + bolt if bolt else ''} not taken",
         description=f"{what}: not taken for a tightening"
                     + (f"; {bolt} held for a supervisor" if bolt else ""))
-    values = _overall(rec, None, None, rec.get("status") != "nok")
+    values = _overall(rec, None, None, True)
     for v in values:      # the controller's OK, not the station's: not decided either
         v.ResultEvaluation = ua.ResultEvaluationEnum(EVALUATION_NOT_DECIDABLE)
     content = ua.JoiningResultDataType(OverallResultValues=values)
