@@ -877,6 +877,26 @@ def _signals(restore: bool) -> Iterator[_Stopped]:
         if signal.getsignal(signum) is on_signal:   # not after the handlers were put back
             os.kill(os.getpid(), signum)
 
+    def later(signum: int) -> None:
+        """Ask for ``signum`` again a moment later (a bounded number of times in a row)."""
+        deferred[0] += 1
+        timer = threading.Timer(DEFER_S, again, (signum,))
+        timer.daemon = True
+        pending.append(timer)
+        timer.start()
+
+    unraisable = sys.unraisablehook
+
+    def on_unraisable(u: Any) -> None:
+        # raised by on_signal in a callback whose exceptions Python ignores (a weakref's,
+        # a finalizer's: SQLAlchemy's registry as the demo started, under load), the
+        # interrupt would be printed as "Exception ignored" and lost: asked again instead
+        if isinstance(u.exc_value, KeyboardInterrupt) and stopped.signal is not None \
+                and deferred[0] < DEFER_TIMES:
+            later(stopped.signal)
+            return
+        unraisable(u)
+
     def on_signal(signum: int, frame: FrameType | None) -> None:
         if stopped.signal is None:
             stopped.signal = signum
@@ -888,11 +908,7 @@ def _signals(restore: bool) -> Iterator[_Stopped]:
         if _importing(frame) and deferred[0] < DEFER_TIMES:
             # raised here (a module lock's weakref callback) the interrupt would be printed
             # as "Exception ignored" with its traceback and lost: asked again a moment later
-            deferred[0] += 1
-            timer = threading.Timer(DEFER_S, again, (signum,))
-            timer.daemon = True
-            pending.append(timer)
-            timer.start()
+            later(signum)
             return
         raise KeyboardInterrupt
 
@@ -910,9 +926,11 @@ def _signals(restore: bool) -> Iterator[_Stopped]:
             # signal.signal under load, before main's own handling (the suite, once)
             if stopped.signal is None:
                 stopped.signal = signal.SIGINT
+    sys.unraisablehook = on_unraisable
     try:
         yield stopped
     finally:
+        sys.unraisablehook = unraisable
         for timer in pending:   # a signal deferred and not raised: main() says it
             timer.cancel()
         signal.pthread_sigmask(signal.SIG_BLOCK, STOPPING)   # no signal while they change
