@@ -284,11 +284,13 @@ class LostRules(NokRules):
 
     def _hold_unknown(self, t: float, bolt: str, note: str, en: Selection) -> list[Action]:
         """``bolt`` (of the vehicle at the station) held, its result not known (``note``);
-        where it is selected, its tool waiting, the selection dropped: else its tool went on
-        at the next frame (a bolt held by a check as the operator came back to it)."""
+        where it is selected, the selection dropped and its tool off: else its tool went on
+        at the next frame (a bolt held by a check as the operator came back to it), or
+        stayed on (a link cut's retry, its tool on again, held by a rundown the catch-up
+        fetched after: an integrator's trial)."""
         acts = self._hold(t, bolt, note, Notice(Said.CUT_UNKNOWN, bolt=bolt, note=note, t=t),
                           under=en)
-        if self.bolt == bolt and self.state in ON_A_BOLT and not self.tool_on:
+        if self.bolt == bolt and (self.state in ON_A_BOLT or self.tool_on):
             acts = self._drop(t, State.TRACKING,
                               StateReason(Because.UNKNOWN_HELD, bolt=bolt)) + acts
         return acts

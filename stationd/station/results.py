@@ -231,7 +231,7 @@ class ResultRules(UnreadRules):
                            unattributed=why, t=ev.t))]
         return [*stored, *self._cut_in_doubt(ev), *self._lost_in_doubt(ev, lost),
                 *self._fetched_in_doubt(ev), *self._late_cut_in_doubt(ev),
-                *self._loosened_after_cut(ev, kind)]
+                *self._ran_again_after_cut(ev, kind)]
 
     def _typed_copy(self, ev: ResultIn, seen: object) -> list[Action] | None:
         """A result pushed with its type whose copy fetched without one (MID 0065 at a
@@ -304,28 +304,34 @@ class ResultRules(UnreadRules):
         return acts + self._hold_enable(ev.t, en, since, lambda u: other_pset_note(
             tid, int(r.pset), int(en.pset or 0)), tid)
 
-    def _loosened_after_cut(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
-        """A loosening fetched after the rundown of a link cut's bolt was proved and
-        recorded, by the same catch-up: of that enable's pset (a tightening one) and vehicle
-        (where it echoes one), made after it (a later id, and not before the enable by its
-        own time).  The tool, still enabled on the controller during the cut (the station
-        cannot turn it off), ran again: the cut's bolt, the one the operator was at, may be
-        the one loosened.  Not left done without a word: held for a person, stored so (a
-        review: done OK, the loosening stored as no bolt's)."""
+    def _ran_again_after_cut(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
+        """A rundown fetched after the rundown of a link cut's bolt was proved and recorded,
+        by the same catch-up: of that enable's pset and vehicle (where it echoes one), made
+        after it (a later id, and not before the enable by its own time).  The tool, still
+        enabled on the controller during the cut (the station cannot turn it off), ran
+        again: on the cut's bolt (the operator's retry after a NOK, or a second hit), or on
+        another of its pset.  Never left as the first rundown said, without a word: the
+        cut's bolt, the one the operator was at, held for a person, stored so.  A review
+        held it for a loosening only (done OK, the loosening stored as no bolt's); an
+        integrator's trial with an independent controller: a NOK then an OK during one cut
+        left the bolt "ending NOK", its OK stored as no bolt's, and its tool went on again
+        (tightened twice)."""
         closed, r = self._cut_closed, ev.result
-        if closed is None or kind is not ResultKind.LOOSENING or not ev.fetched or ev.live:
+        if closed is None or kind is ResultKind.EVENT or not ev.fetched or ev.live:
             return []
         cut, after = closed
         en, tid = cut.selection, int(r.tightening_id)
         echoed = str(r.vin or "").strip()
-        if en.loosen or en.pset is None or int(r.pset) != en.pset or tid <= after \
+        if en.pset is None or int(r.pset) != en.pset or tid <= after \
                 or (echoed and echoed != en.vin) \
                 or (ev.made_at is not None and ev.made_at < cut.enabled_at - CLOCK_SLACK_S):
             return []
         self._cut_closed = None          # held once
-        return self._cut_unknown(ev.t, f"tightening {tid}, a loosening of its pset made during "
-                                       f"the link cut after its rundown {after}, may have "
-                                       "loosened it", cut)
+        what = "a loosening" if kind is ResultKind.LOOSENING and not en.loosen \
+            else "a rundown"
+        return self._cut_unknown(ev.t, f"tightening {tid}, {what} of its pset made during the "
+                                       f"link cut after its rundown {after}, may be its own "
+                                       "again or another bolt's", cut)
 
     def _controller_event(self, ev: ResultIn, kind: ResultKind,
                           held: Selection | None = None) -> list[Action]:

@@ -301,8 +301,8 @@ class CoreState:
     _cut_unsettled: tuple[Selection, int | None] | None = field(default=None, repr=False)
     #: a link cut whose rundown a fetched result proved (that cut, and the result's id), until
     #: its catch-up ends: the tool, still enabled on the controller during the cut, may have
-    #: run again; a loosening of its pset fetched after it may be its bolt's
-    #: (:meth:`ResultRules._loosened_after_cut`)
+    #: run again; a rundown of its pset fetched after it may be its bolt's
+    #: (:meth:`ResultRules._ran_again_after_cut`)
     _cut_closed: tuple[_Cut, int] | None = field(default=None, repr=False)
     _judged_at: float = field(default=float("-inf"), repr=False)   # when it came
     # the station's start or the controller's last fault: a result fetched afterwards was

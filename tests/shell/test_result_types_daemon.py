@@ -221,7 +221,8 @@ def test_a_tightening_made_during_a_link_cut_is_recorded_to_its_bolt(tmp_path, r
     link is back (its results are kept, its volatile state, the tool and the VIN, is not),
     or its results are cleared as the cut begins (reset or replaced: its ids start again,
     the next one the id of the result the station recorded last): the result made under the
-    enable is fetched and recorded to its bolt; the second, not provably under it, is not."""
+    enable is fetched and recorded to its bolt; the second, not provably under it, is not,
+    and holds that bolt (the tool ran again during the cut: on it, or on another bolt)."""
     pose = tmp_path / "pose"
     with tracking(tmp_path, "CUTVIN00000000001") as (d, _, ctl):
         attempts = _session_starts(ctl)
@@ -253,6 +254,9 @@ def test_a_tightening_made_during_a_link_cut_is_recorded_to_its_bolt(tmp_path, r
         d.wait_log(f"tightening {made.tightening_id} made during the link cut, fetched after "
                    "it: recorded to B05")
         d.wait_log(f"tightening {again.tightening_id} fetched after a reconnect")
+        d.wait_log(f"B05: its result during the link cut not known: tightening "
+                   f"{again.tightening_id}, a rundown of its pset made during the link cut "
+                   f"after its rundown {made.tightening_id}")
         # said as they are decided, stored after: the rows are waited for (fetched results
         # are not acknowledged as pushed ones are)
         db = tmp_path / "station.db"
@@ -310,8 +314,9 @@ def test_a_tightening_made_during_a_cut_before_any_result_was_recorded_goes_to_i
     """The station has recorded no result of this controller yet (no tightening id to count
     from) when the link is cut during its first enable: at the reconnect the results made
     since that enable are found back from the controller's newest by their timestamps; the
-    first, made under the enable, is recorded to its bolt, the second stays unattributed;
-    what the controller made before the station started (its history) is not fetched."""
+    first, made under the enable, is recorded to its bolt, the second stays unattributed
+    and holds that bolt; what the controller made before the station started (its history)
+    is not fetched."""
     pose = tmp_path / "pose"
     ctl = controller(9)
     ctl.start()
@@ -339,6 +344,8 @@ def test_a_tightening_made_during_a_cut_before_any_result_was_recorded_goes_to_i
         d.wait_log(f"tightening {again.tightening_id} fetched after a reconnect")
         d.wait_log(f"result {again.tightening_id} (pset {again.pset}) fetched after a "
                    "reconnect")
+        d.wait_log(f"B05: its result during the link cut not known: tightening "
+                   f"{again.tightening_id}, a rundown of its pset")
     db = tmp_path / "station.db"
     assert _rows(db, "SELECT r.tightening_id, b.code FROM tightening_records r JOIN bolts b "
                      "ON b.id = r.bolt_id") == [(made.tightening_id, "B05")]
