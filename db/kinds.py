@@ -165,11 +165,15 @@ def lost_unknown_note(tightening_id: int, pset: int | None, enabled_at: float) -
             f"{'' if pset is None else f' for pset {pset}'} at {at} UTC")
 
 
+#: the mark of a held bolt's note where a result of another pset came (:func:`other_pset_note`)
+OTHER_PSET_MARK = " while its tool was on for pset "
+
+
 def other_pset_note(tightening_id: int, pset: int, sent: int) -> str:
     """A held bolt's note where a result of another pset (``pset``) than the one sent for it
     (``sent``) came while its tool was on: a rundown with another program, or none of it."""
-    return (f"tightening {tightening_id} came under pset {pset} while its tool was on for "
-            f"pset {sent}: run with another program, or not its own")
+    return (f"tightening {tightening_id} came under pset {pset}{OTHER_PSET_MARK}{sent}: run "
+            "with another program, or not its own")
 
 
 def check_unknown_note(why: str, pset: int | None, enabled_at: float) -> str:
@@ -234,9 +238,10 @@ class HeldUnder:
 
 def is_not_taken_note(note: str | None) -> bool:
     """Whether a held bolt's note is a result read but not taken for a tightening (an OK
-    without a type outside its window, a type the station does not know; else: a result not
-    read)."""
-    return note is not None and note.startswith((NOT_TAKEN_NOTE, UNKNOWN_TYPE_NOTE))
+    without a type outside its window, a type the station does not know, one of another
+    pset than the one sent; else: a result not read)."""
+    return note is not None and (note.startswith((NOT_TAKEN_NOTE, UNKNOWN_TYPE_NOTE))
+                                 or OTHER_PSET_MARK in note)
 
 
 __all__ = [
@@ -255,6 +260,7 @@ __all__ = [
     "NOT_TAKEN",
     "NOT_TAKEN_NOTE",
     "OK",
+    "OTHER_PSET_MARK",
     "PENDING",
     "RUNDOWN_KINDS",
     "SKIPPED",

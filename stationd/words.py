@@ -91,8 +91,12 @@ def _locked(bolt: str | None, count: int | None) -> str:
 
 def _unread(bolt: str | None, note: str | None) -> str:
     """A bolt held for a result that could not be read, or for one never in hand (a link
-    cut's, a lost push's: "could not be read" was wrong there, a supervisor's trial): the
-    refusal and the notice alike."""
+    cut's, a lost push's: "could not be read" was wrong there, a supervisor's trial), or for
+    one read and not taken (a type the station does not know, another pset's: an
+    integrator's trial read "could not be read" there too): the refusal and the notice
+    alike."""
+    if is_not_taken_note(note):
+        return f"{bolt}: {note}: not taken as a tightening; {CHECK_ON_CONTROLLER}"
     if is_unknown_note(note):
         return f"{bolt}: {note}: {CHECK_ON_CONTROLLER}"
     return f"{bolt}: the controller's result could not be read ({note}): {CHECK_ON_CONTROLLER}"
@@ -418,9 +422,7 @@ _WORDS: dict[Why, Callable[[Reason], str]] = {
                                     "tightening OK as entered; check the value on the "
                                     "controller's screen (a NOK is entered as a NOK: NOK in "
                                     "the screen's form, or --nok)"),
-    Why.HELD: lambda r: (f"{r.bolt}: {r.note}: not taken as a tightening; {CHECK_ON_CONTROLLER}"
-                         if is_not_taken_note(r.note) else
-                         _unread(r.bolt, r.note)),
+    Why.HELD: lambda r: _unread(r.bolt, r.note),
     Why.LOOSEN_FIRST: lambda r: (f"{r.bolt}: loosen first (loosen pset {r.pset}), then "
                                  "tighten" + (f": {_command(r.user, r.note)}"
                                               if r.user is not None else "")),

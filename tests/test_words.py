@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import pytest
 
-from db.kinds import loosening_note, not_taken_note
+from db.kinds import loosening_note, not_taken_note, other_pset_note, unknown_type_note
 from drivers.wrench.base import ResultType
 from stationd.reasons import (
     CoreFault,
@@ -219,6 +219,21 @@ def test_a_locked_or_held_bolt_is_said_alike_as_a_notice_and_as_a_refusal() -> N
         reason_words(Reason(Why.LOCKED, bolt="B2", count=3))
     assert notice_words(Notice(Said.HELD, bolt="B2", note="tightening 9")) == \
         reason_words(Reason(Why.HELD, bolt="B2", note="tightening 9"))
+
+
+@pytest.mark.parametrize("note", [unknown_type_note(9, 2002), other_pset_note(5005, 3, 1)])
+def test_a_bolt_held_for_a_result_read_and_not_taken_is_not_said_unreadable(note: str) -> None:
+    """An integrator's trial with an independent controller: a bolt held for a result of
+    another pset, or of a type the station does not know, was said "the controller's result
+    could not be read (...)" where that result was read.  Said as its note, alike as a notice
+    and as a refusal; a result that did not read still says so."""
+    said = notice_words(Notice(Said.HELD, bolt="B2", note=note))
+    assert said.startswith(f"B2: {note}: not taken as a tightening; check it on the "
+                           "controller") and \
+        "could not be read" not in said
+    assert said == reason_words(Reason(Why.HELD, bolt="B2", note=note))
+    assert "could not be read (tightening 9)" in notice_words(
+        Notice(Said.HELD, bolt="B2", note="tightening 9"))
 
 
 def test_a_notice_goes_on_the_wire_as_its_kind_and_fields() -> None:
