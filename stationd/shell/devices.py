@@ -92,6 +92,7 @@ class Devices:
             for cam in cams:
                 quiet(cam.close)
             raise _both(failed)
+        said(name, pc.left, pc.right, cams)
         # unnamed: the station says the pair's name before its reason
         return Pair(cams, StereoGrabber(cams[0], cams[1], pc.max_skew_s, name=""))
 
@@ -104,6 +105,21 @@ class Devices:
         problem = size_problem(self.cfg.pairs[name].calibration, left.image, right.image)
         if problem is not None:
             raise ProtocolError(problem)
+        pc = self.cfg.pairs[name]
+        said(name, pc.left or "left", pc.right or "right", pair.cams)
+
+
+def said(pair: str, left: str, right: str, cams: list[CameraDevice]) -> None:
+    """Each camera of ``pair`` as it says it is (model, serial number, interface, pixel
+    format and size), journaled as it opens or comes back: a technician's trial found the
+    controller's serial in the journal and no camera's, so a camera replaced (or plugged
+    back into another port) left no trace of which unit took the pictures."""
+    for name, cam in zip((left, right), cams, strict=True):
+        try:
+            words = cam.identity()
+        except Exception as exc:   # a description never fails an open
+            words = f"not said ({one_line(exc)})"
+        log.info("%s: camera %s: %s", pair, name, words)
 
 
 def reconnect_lift(lift: Lift) -> None:

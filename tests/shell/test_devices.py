@@ -37,3 +37,27 @@ def test_a_pair_with_one_camera_down_says_that_one_as_before(tmp_path: Path) -> 
     with pytest.raises(DeviceError) as err:
         devices.open_pair("pair1")
     assert "camera pair1_" not in str(err.value) and f"{tmp_path}/r" in str(err.value)
+
+
+def test_each_camera_of_a_pair_is_journaled_as_it_says_it_is(tmp_path: Path, caplog) -> None:
+    """A maintenance technician's trial: the controller's serial number was in the journal,
+    no camera's, so a replaced camera left no trace of which unit took the pictures.  Each
+    camera says what it is as its pair opens, under the pair's and the camera's names."""
+    import logging
+
+    import cv2
+    import numpy as np
+
+    for side in ("l", "r"):
+        (tmp_path / side).mkdir()
+        cv2.imwrite(str(tmp_path / side / "0.png"), np.zeros((6, 8, 3), np.uint8))
+    devices = _pair_of(tmp_path, f"file://{tmp_path}/l/*.png", f"file://{tmp_path}/r/*.png")
+    with caplog.at_level(logging.INFO, logger="stationd"):
+        pair = devices.open_pair("pair1")
+    try:
+        lines = [r.getMessage() for r in caplog.records if r.name == "stationd"]
+        for side, folder in (("left", "l"), ("right", "r")):
+            [line] = [m for m in lines if m.startswith(f"pair1: camera pair1_{side}: ")]
+            assert f"{tmp_path}/{folder}" in line, line
+    finally:
+        pair.close()
