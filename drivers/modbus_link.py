@@ -233,9 +233,13 @@ class ModbusLink:
             if client.heard > heard:   # it answered, then hung up: not a Modbus device
                 raise self._garbage(client, what) from None
             # (a Modbus server answers even what it refuses: a technician's trial, the lift's
-            # and the controller's ports swapped, read no hint of another device's port)
-            said = "the device closed the connection without an answer (a Modbus server " \
-                "answers, even with an exception: another device's port?)" \
+            # and the controller's ports swapped, read no hint of another device's port; one
+            # that answered on this connection before is that device gone: another trial,
+            # a PLC switched off, read the hint of another device's port)
+            said = ("the device closed the connection (it answered on it before: switched "
+                    "off, restarted, or its network dropped)" if heard else
+                    "the device closed the connection without an answer (a Modbus server "
+                    "answers, even with an exception: another device's port?)") \
                 if "closed" in exc.string else exc.string.replace(type(client).__name__,
                                                                   self._protocol())
             raise self._error(ConnectionLostError, f"link lost {what}: {said}") from None

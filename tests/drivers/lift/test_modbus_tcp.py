@@ -205,8 +205,13 @@ def test_plc_disappears_and_comes_back_on_reconnect(plc):
     with lift_for(port) as lift:
         lift.read_state()
         plc.stop_tcp()
-        with pytest.raises(ConnectionLostError, match="link lost reading holding registers"):
+        with pytest.raises(ConnectionLostError, match="link lost reading holding registers"
+                           ) as lost:
             lift.read_state()
+        # it answered on this link before: gone, not another device's port (a technician's
+        # trial: a PLC switched off was said with that hint)
+        assert "switched off, restarted, or its network dropped" in str(lost.value)
+        assert "another device's port" not in str(lost.value)
         t0 = time.monotonic()
         with pytest.raises(ConnectionLostError, match=r"link down \(link lost reading"):
             lift.read_state(timeout=5.0)
