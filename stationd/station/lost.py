@@ -14,6 +14,7 @@ from db.kinds import (
     id_span,
     lost_gap_note,
     lost_unknown_note,
+    other_pset_note,
 )
 from drivers.keeper import FaultKind
 from stationd.reasons import Unproved, UnprovedKind
@@ -508,12 +509,21 @@ class LostRules(NokRules):
         """A result stored unattributed while a link cut's result is owed, of the pset sent
         then (pushed again by the controller after the reconnect, or fetched and not proved
         by its data): it may be that bolt's, or not.  Never taken for it, and never left
-        open either (it may be tightened): the bolt is held for a person."""
+        open either (it may be tightened): the bolt is held for a person.  Of another pset,
+        made after the enable (or when, not known): the tool, enabled during the cut, ran
+        with another program (one selected on the controller itself) -- as where the link
+        is up, held (an integrator's trial: "no tightening made while the link was down:
+        open as before", and its tool went on again)."""
         cut, r = self._cut, ev.result
-        if cut is None or cut.selection.pset is None or int(r.pset) != cut.selection.pset:
+        if cut is None or cut.selection.pset is None:
             return []
-        return self._cut_unknown(ev.t, f"tightening {int(r.tightening_id)} may be its own "
-                                       "(not proved by the controller's data)")
+        tid, pset = int(r.tightening_id), int(r.pset)
+        if pset == cut.selection.pset:
+            return self._cut_unknown(ev.t, f"tightening {tid} may be its own (not proved by "
+                                           "the controller's data)")
+        if ev.made_at is not None and ev.made_at < cut.enabled_at - CLOCK_SLACK_S:
+            return []
+        return self._cut_unknown(ev.t, other_pset_note(tid, pset, cut.selection.pset))
 
     def _on_caught_up(self, ev: CaughtUp) -> list[Action]:
         """:meth:`_cut_caught_up`; a pushed result waited for since ids it skipped were told

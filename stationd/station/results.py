@@ -306,12 +306,13 @@ class ResultRules(UnreadRules):
 
     def _ran_again_after_cut(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
         """A rundown fetched after the rundown of a link cut's bolt was proved and recorded,
-        by the same catch-up: of that enable's pset and vehicle (where it echoes one), made
+        by the same catch-up: of that enable's vehicle (where it echoes one), made
         after it (a later id, and not before the enable by its own time).  The tool, still
         enabled on the controller during the cut (the station cannot turn it off), ran
-        again: on the cut's bolt (the operator's retry after a NOK, or a second hit), or on
-        another of its pset.  Never left as the first rundown said, without a word: the
-        cut's bolt, the one the operator was at, held for a person, stored so.  A review
+        again, with that pset or another the controller selected itself: on the cut's bolt
+        (the operator's retry after a NOK, or a second hit), or on another bolt.  Never left
+        as the first rundown said, without a word: the cut's bolt, the one the operator was
+        at, held for a person, stored so.  A review
         held it for a loosening only (done OK, the loosening stored as no bolt's); an
         integrator's trial with an independent controller: a NOK then an OK during one cut
         left the bolt "ending NOK", its OK stored as no bolt's, and its tool went on again
@@ -322,14 +323,16 @@ class ResultRules(UnreadRules):
         cut, after = closed
         en, tid = cut.selection, int(r.tightening_id)
         echoed = str(r.vin or "").strip()
-        if en.pset is None or int(r.pset) != en.pset or tid <= after \
-                or (echoed and echoed != en.vin) \
+        if en.pset is None or tid <= after or (echoed and echoed != en.vin) \
                 or (ev.made_at is not None and ev.made_at < cut.enabled_at - CLOCK_SLACK_S):
             return []
         self._cut_closed = None          # held once
         what = "a loosening" if kind is ResultKind.LOOSENING and not en.loosen \
             else "a rundown"
-        return self._cut_unknown(ev.t, f"tightening {tid}, {what} of its pset made during the "
+        # (of another pset: the controller's own program selected, the tool still on; a
+        # trial: a NOK then a rundown of another pset left the bolt ending NOK, its tool on)
+        which = "of its pset" if int(r.pset) == en.pset else f"of pset {int(r.pset)}"
+        return self._cut_unknown(ev.t, f"tightening {tid}, {what} {which} made during the "
                                        f"link cut after its rundown {after}, may be its own "
                                        "again or another bolt's", cut)
 

@@ -93,18 +93,63 @@ def test_an_ok_after_the_cut_s_nok_holds_its_bolt_and_its_tool_stays_off():
     assert not d.core.tool_on and not d.tool
 
 
-def test_another_pset_s_rundown_after_the_cut_s_rundown_holds_nothing():
-    """Guards: a rundown of another pset (not the cut's enable's: never that enable's tool),
-    or one made before the enable by its own time, stored unattributed as before, B1 done."""
-    for second, made in ((res(42, 2, True, 2), 6.0), (res(42, 2, True, 1), 6.0),
-                         (res(42, 1, True, 1), -10.0)):
+def test_another_pset_s_rundown_after_the_cut_s_nok_holds_its_bolt():
+    """An integrator's trial: B1's NOK (41) then a rundown of pset 2 (42: a program selected
+    on the controller itself, the tool still enabled during the cut) left B1 ending NOK and
+    its tool on again.  Held, as a rundown of its own pset is."""
+    for code in (1, 2):
+        d = _ready()
+        t0 = _cut_with_its_rundown(d, ok=False)
+        acts = d.feed(ResultIn(d.t, res(42, 2, True, code), fetched=True, follows=40,
+                               made_at=t0 + 6.0))
+        acts += d.feed(CaughtUp(d.t, True, "", 1))
+        assert [(a.vin, a.bolt) for a in acts if isinstance(a, StoreCutUnknown)] == [
+            ("VIN1", "B1")]
+        m = d.core.matcher
+        assert m is not None and "tightening 42, a " in m.held["B1"] \
+            and "of pset 2 made during the link cut" in m.held["B1"]
+        _on(d, 1, 3)
+        assert not d.core.tool_on and not d.tool
+
+
+def test_a_rundown_made_before_the_enable_after_the_cut_s_rundown_holds_nothing():
+    """Guard: one whose own time puts it before the enable (beyond the clock's slack) is no
+    rundown of that tool's enable: stored unattributed as before, B1 done."""
+    for pset in (1, 2):
         d = _ready()
         t0 = _cut_with_its_rundown(d)
-        acts = d.feed(ResultIn(d.t, second, fetched=True, follows=40, made_at=t0 + made))
+        acts = d.feed(ResultIn(d.t, res(42, pset, True, 1), fetched=True, follows=40,
+                               made_at=t0 - 10.0))
         acts += d.feed(CaughtUp(d.t, True, "", 1))
         assert not any(isinstance(a, StoreCutUnknown) for a in acts)
         assert d.core.matcher is not None and "B1" in d.core.matcher.done
         assert "B1" not in d.core.matcher.held
+
+
+def test_a_cut_whose_only_rundown_is_of_another_pset_holds_its_bolt():
+    """An integrator's trial: the cut's only result was of pset 3 (the controller's own
+    program), the tool enabled for B1's pset 1: said "no tightening made while the link
+    was down: B1 open as before" and its tool went on again.  Where the link is up such a
+    result holds the bolt; so it does after a cut.  One made before the enable does not."""
+    for made, held in ((6.0, True), (-10.0, False)):
+        d = _ready()
+        d.feed(ResultIn(d.t, res(40, 2, True, 1)))
+        _enabled(d, 1)
+        t0 = d.t
+        d.t += 10.0
+        d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "link lost"))
+        d.t += 5.0
+        d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+        d.t += 0.1
+        acts = d.feed(ResultIn(d.t, res(41, 3, True, 1), fetched=True, follows=40,
+                               made_at=t0 + made))
+        acts += d.feed(CaughtUp(d.t, True, "", 1))
+        m = d.core.matcher
+        assert m is not None and ("B1" in m.held) is held, made
+        if held:
+            assert "tightening 41 came under pset 3" in m.held["B1"]
+            _on(d, 1, 3)
+            assert not d.core.tool_on and not d.tool
 
 
 def test_a_refused_command_during_the_catch_up_keeps_the_loosening_s_hold():
