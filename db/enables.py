@@ -15,7 +15,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from db.engine import Transactions
-from db.models import ToolEnable, utcnow
+from db.models import TighteningRecord, ToolEnable, utcnow
 
 
 @dataclass(frozen=True)
@@ -30,6 +30,18 @@ class OwedEnable:
     selection: dict[str, Any]
     enabled_at: datetime
     off_at: datetime | None
+
+
+@dataclass(frozen=True)
+class CutRundown:
+    """The last tool enable, answered by a rundown made during a link cut and fetched after
+    the reconnect (``tightening_id``, stored at ``recorded_at``): the last rundown stored.
+    The catch-up that fetched it may have been cut short (a kill, a stop, a reload between
+    two fetches): a rundown it had not fetched yet, made by then, may be that tool's again."""
+
+    enable: OwedEnable
+    tightening_id: int
+    recorded_at: datetime
 
 
 def settle(s: Session, enable_id: int | None,
@@ -73,6 +85,20 @@ class ToolEnables:
             if row is not None and row.off_at is None:
                 row.off_at = at
 
+    def cut_rundown(self) -> CutRundown | None:
+        """The last enable's rundown where it was made during a link cut (:class:`CutRundown`)
+        and is the last rundown stored, of that enable's bolt and vehicle, stored after the
+        enable; else None."""
+        with self._session(False) as s:
+            row = s.scalar(select(ToolEnable).order_by(ToolEnable.id.desc()).limit(1))
+            rec = s.scalar(select(TighteningRecord).order_by(TighteningRecord.id.desc())
+                           .limit(1))
+            if row is None or row.settled_at is None or rec is None or not rec.offline \
+                    or rec.tightening_id is None or rec.recorded_at < row.enabled_at \
+                    or (rec.vehicle.vin, rec.bolt.code) != (row.vin, row.bolt):
+                return None
+            return CutRundown(_owed(row), rec.tightening_id, rec.recorded_at)
+
     def owed(self) -> OwedEnable | None:
         """The latest tool enable, if its result is not recorded (an older one was superseded
         by it: the tool can only have been enabled for the latest)."""
@@ -80,5 +106,10 @@ class ToolEnables:
             row = s.scalar(select(ToolEnable).order_by(ToolEnable.id.desc()).limit(1))
             if row is None or row.settled_at is not None:
                 return None
-            return OwedEnable(row.id, row.vin, row.bolt, row.pset, row.parameters_id,
-                              dict(row.selection), row.enabled_at, row.off_at)
+            return _owed(row)
+
+
+def _owed(row: ToolEnable) -> OwedEnable:
+    """A tool enable's row as the station reads it."""
+    return OwedEnable(row.id, row.vin, row.bolt, row.pset, row.parameters_id,
+                      dict(row.selection), row.enabled_at, row.off_at)

@@ -29,6 +29,7 @@ import cv2
 from db.checks import record_check
 from db.counting import counted
 from db.curves import link_curves, store_curve
+from db.enables import CutRundown, OwedEnable
 from db.entered import record_entered
 from db.errors import DatabaseError, DataError, DbError, NotFoundError, VehicleClosedError
 from db.holds import ENDS_A_HOLD
@@ -273,19 +274,16 @@ class Records:
         ``cut`` (a controller that keeps its results to fetch), the new station takes it as a
         link cut during it (its result, made meanwhile, fetched and proved; its tool kept off
         until then).  None where neither applies."""
-        owed = self._repo().enables.owed()
+        enables = self._repo().enables
+        owed = enables.owed()
         if owed is None:
-            return None
+            return self._cut_rundown(enables.cut_rundown()) if cut else None
         now = time.time()
         off = owed.off_at.timestamp() if owed.off_at is not None else now
         in_window = now - off < late_result_s
         if not in_window and not cut:
             return None
-        j = owed.selection
-        sel = Selection(owed.bolt, owed.pset, xyz(j["point_mm"]), float(j["tilt_deg"]),
-                        float(j["distance_mm"]), float(j["exposure_t"]), float(j["decided_t"]),
-                        None, owed.vin, owed.parameters_id, bool(j.get("loosen", False)),
-                        j.get("operator"), _window(j.get("torque_window")))
+        sel = _selection(owed)
         self._enable, self._enable_off = (sel, owed.id), owed.off_at is not None
         if in_window:
             self.log.info("the tool was enabled for bolt %s of %s (pset %s) when the last station "
@@ -296,6 +294,24 @@ class Records:
                           "recorded: the controller's results since are fetched for it", owed.bolt,
                           owed.vin, owed.pset)
         return Owed(sel, off, owed.enabled_at.timestamp() if cut else None, in_window)
+
+    def _cut_rundown(self, done: CutRundown | None) -> Owed | None:
+        """The last enable, answered by a rundown made during a link cut (``done``): the
+        catch-up that fetched it may have been cut short by the stop (a kill, a reload
+        between two fetches), so the new station's catch-up holds its bolt for a rundown it
+        fetches made by then (a re-check with an independent controller: a NOK then an OK
+        during a cut, killed between their fetches, left the bolt ending NOK, its tool on
+        again).  None where there is none."""
+        if done is None:
+            return None
+        en = done.enable
+        self.log.info("the last rundown recorded (tightening %d, bolt %s of %s) was made "
+                      "during a link cut: a later one the controller made before it was "
+                      "stored, fetched now (the stop may have cut its catch-up short), holds "
+                      "that bolt", done.tightening_id, en.bolt, en.vin)
+        return Owed(_selection(en), en.enabled_at.timestamp(), en.enabled_at.timestamp(),
+                    in_window=False,
+                    cut_rundown=(done.tightening_id, done.recorded_at.timestamp()))
 
     def settle(self, sel: Selection) -> None:
         """The enable for ``sel`` is owed nothing more (:class:`SettleEnable`)."""
@@ -929,3 +945,12 @@ def _aware(t: datetime | None) -> datetime | None:
 
 
 __all__ = ["STATION_FAULTS", "Records", "Unsaved", "controller_time", "xyz"]
+
+
+def _selection(owed: OwedEnable) -> Selection:
+    """The selection a noted tool enable was made for, as the core took it."""
+    j = owed.selection
+    return Selection(owed.bolt, owed.pset, xyz(j["point_mm"]), float(j["tilt_deg"]),
+                     float(j["distance_mm"]), float(j["exposure_t"]), float(j["decided_t"]),
+                     None, owed.vin, owed.parameters_id, bool(j.get("loosen", False)),
+                     j.get("operator"), _window(j.get("torque_window")))

@@ -59,7 +59,8 @@ def torque_window(parameters: Parameters | None) -> tuple[float, float] | None:
 class Owed:
     """What a station owes the next one (a reload, a restart): the tool was enabled for
     ``selection`` and went off at ``off_at`` (the new station's start when it stopped with the
-    tool on); a result of its pset within ``late_result_s`` of that belongs to that bolt."""
+    tool on); a result of its pset within ``late_result_s`` of that belongs to that bolt
+    (or, with ``cut_rundown``, its result is in and the tool may have run again)."""
 
     selection: Selection
     off_at: float
@@ -67,6 +68,10 @@ class Owed:
     enabled_at: float | None = None
     #: its late-result window still runs: a result of its pset pushed now is its own
     in_window: bool = True
+    #: answered already by a rundown made during a link cut (its tightening id, and when it
+    #: was stored): the catch-up that fetched it may have been cut short by the stop, so a
+    #: rundown fetched now, made by then, may be that tool's again (its bolt held)
+    cut_rundown: tuple[int, float] | None = None
 
 
 @dataclass(frozen=True)

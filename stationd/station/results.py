@@ -212,7 +212,7 @@ class ResultRules(UnreadRules):
         proved, not_proved = self._made_during_cut(ev)
         if proved is not None:
             if self._cut is not None:
-                self._cut_closed = (self._cut, tid)
+                self._cut_closed = (self._cut, tid, None)
             return self._attribute(ev, proved, cut=True)
         why = Unattributed(UnattributedKind.OUTSIDE if not ev.fetched else
                            UnattributedKind.FETCHED_CHECKED if ev.live and ev.before is None
@@ -320,11 +320,15 @@ class ResultRules(UnreadRules):
         closed, r = self._cut_closed, ev.result
         if closed is None or kind is ResultKind.EVENT or not ev.fetched or ev.live:
             return []
-        cut, after = closed
+        cut, after, by = closed
         en, tid = cut.selection, int(r.tightening_id)
         echoed = str(r.vin or "").strip()
+        # (``by``: restored at a start, when the cut's rundown was stored: one made later
+        # is not that catch-up's, its time not known, not known to be)
         if en.pset is None or tid <= after or (echoed and echoed != en.vin) \
-                or (ev.made_at is not None and ev.made_at < cut.enabled_at - CLOCK_SLACK_S):
+                or (ev.made_at is not None and ev.made_at < cut.enabled_at - CLOCK_SLACK_S) \
+                or (by is not None and (ev.made_at is None
+                                        or ev.made_at > by + CLOCK_SLACK_S)):
             return []
         self._cut_closed = None          # held once
         what = "a loosening" if kind is ResultKind.LOOSENING and not en.loosen \

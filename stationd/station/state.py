@@ -303,7 +303,9 @@ class CoreState:
     #: its catch-up ends: the tool, still enabled on the controller during the cut, may have
     #: run again; a rundown of its pset fetched after it may be its bolt's
     #: (:meth:`ResultRules._ran_again_after_cut`)
-    _cut_closed: tuple[_Cut, int] | None = field(default=None, repr=False)
+    #: (and, restored at a start, the time its rundown was stored: one made later is not the
+    #: cut's; None: this station's own catch-up)
+    _cut_closed: tuple[_Cut, int, float | None] | None = field(default=None, repr=False)
     _judged_at: float = field(default=float("-inf"), repr=False)   # when it came
     # the station's start or the controller's last fault: a result fetched afterwards was
     # made before it, so never under an enable that came later
@@ -478,6 +480,13 @@ class CoreState:
         after a link cut during that enable (the controller's link was closed and opened
         again), one fetched after it is placed by the controller's data, the tool kept off
         until the catch-up has ended it."""
+        if owed.cut_rundown is not None:
+            # its result in already, made during a link cut: the catch-up that fetched it
+            # may have been cut short by the stop (:meth:`ResultRules._ran_again_after_cut`)
+            tid, stored = owed.cut_rundown
+            at = owed.enabled_at if owed.enabled_at is not None else owed.off_at
+            self._cut_closed = (_Cut(owed.selection, at, stored), tid, stored)
+            return
         if owed.in_window:
             self._enabled, self._off_at = owed.selection, owed.off_at
         if owed.enabled_at is not None:

@@ -1,0 +1,91 @@
+"""A stop (a kill, a SIGTERM, a reload) between two fetches of a link cut's catch-up, over a
+real SQLite database: the cut's rundown of B1 (a NOK, made during the cut) was fetched and
+recorded, the retry made during the same cut not fetched yet.  A re-check with an
+independent controller found the new station's catch-up storing the retry as no bolt's,
+B1 left ending NOK and its tool on again (tightened twice).  The new station takes over
+the watch the stopped catch-up kept: a rundown it fetches made by the time the cut's
+rundown was stored holds B1; one made later does not."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+
+from stationd.shell.records import Records
+from stationd.station.actions import LoadVehicle, Record, StoreCutUnknown
+from stationd.station.core import StationCore
+from stationd.station.inputs import CaughtUp, DeviceBack, ResultIn, Started, VehicleLoaded
+from tests.shell.test_records_copies import PARAMS, _records, _result, _sel
+
+
+def _stopped_after_the_cut_s_rundown(tmp_path: Path, offline: bool = True) -> Records:
+    """B1 enabled; its NOK (7), made during a link cut, fetched and recorded (``offline``);
+    then the station stops (its repository closed) and a new one opens the database."""
+    first = _records(tmp_path)
+    assert isinstance(first.load_vehicle(LoadVehicle(12, "VIN1")), VehicleLoaded)
+    b1 = _sel("B1")
+    first.note_enable(b1)
+    nok = dataclasses.replace(_result(7), ok=False)
+    first.write(first.unsaved_result(Record("VIN1", "B1", nok, b1, offline=offline,
+                                            t=time.time()), None))
+    assert first.repo is not None
+    first.repo.close()
+    return _records(tmp_path)
+
+
+def _new_core(records: Records) -> tuple[StationCore, float]:
+    """The new station's core, told what the last one owed, the vehicle loaded again and
+    the controller back (its catch-up under way).  When the cut's rundown was stored."""
+    owed = records.owed(late_result_s=5.0)
+    assert owed is not None and owed.cut_rundown is not None
+    tid, stored = owed.cut_rundown
+    assert tid == 7 and owed.selection.bolt == "B1" and not owed.in_window
+    core = StationCore(PARAMS, leave_frames=2)
+    core.resume(owed)
+    core.feed(Started(time.time()))
+    loaded = records.load_vehicle(LoadVehicle(12, "VIN1"))
+    assert isinstance(loaded, VehicleLoaded)
+    core.feed(loaded)
+    core.feed(DeviceBack(time.time(), "wrench", reconnects=0))
+    return core, stored
+
+
+def test_the_retry_the_stopped_catch_up_had_not_fetched_holds_the_cut_s_bolt(
+        tmp_path: Path) -> None:
+    records = _stopped_after_the_cut_s_rundown(tmp_path)
+    core, stored = _new_core(records)
+    acts = core.feed(ResultIn(time.time(), _result(8), fetched=True, follows=7,
+                              made_at=stored - 1.0))
+    acts += core.feed(CaughtUp(time.time(), True, "", 0))
+    assert not any(isinstance(a, Record) for a in acts)
+    assert [(a.vin, a.bolt) for a in acts if isinstance(a, StoreCutUnknown)] == [("VIN1", "B1")]
+    assert "B1" not in core.allowed()
+    assert records.repo is not None
+    records.repo.close()
+
+
+def test_a_rundown_made_after_the_cut_s_rundown_was_stored_holds_nothing(
+        tmp_path: Path) -> None:
+    """Made after (the station stopped, the tool went on from the controller's own panel,
+    say): not that catch-up's; and after the first catch-up, nothing is watched any more."""
+    for made in (+60.0, None):
+        (tmp_path / str(made)).mkdir()
+        records = _stopped_after_the_cut_s_rundown(tmp_path / str(made))
+        core, stored = _new_core(records)
+        acts = core.feed(ResultIn(time.time(), _result(8), fetched=True, follows=7,
+                                  made_at=None if made is None else stored + made))
+        acts += core.feed(CaughtUp(time.time(), True, "", 0))
+        acts += core.feed(ResultIn(time.time(), _result(9), fetched=True, follows=8,
+                                   made_at=stored - 1.0))
+        assert not any(isinstance(a, StoreCutUnknown) for a in acts), made
+        assert "B1" in core.allowed()
+        assert records.repo is not None
+        records.repo.close()
+
+
+def test_a_last_rundown_made_with_the_link_up_is_owed_nothing(tmp_path: Path) -> None:
+    records = _stopped_after_the_cut_s_rundown(tmp_path, offline=False)
+    assert records.owed(late_result_s=5.0) is None
+    assert records.repo is not None
+    records.repo.close()
