@@ -851,8 +851,9 @@ def answer_words(answer: Answer) -> str:
             + ([f"its hold ({ended['hold']})"] if "hold" in ended else [])
         loosen = "" if ended.get("loosen_pset") is None else \
             f"; its loosen pset {ended['loosen_pset']} goes first"
-        return f"{head}: accepted: {' and '.join(said)} ended" + _reopened(
-            answer.command.bolt, ended.get("hold")) + loosen
+        left = (f": {answer.command.bolt} stays done (its OK result recorded)"
+                if ended.get("done") else _reopened(answer.command.bolt, ended.get("hold")))
+        return f"{head}: accepted: {' and '.join(said)} ended" + left + loosen
     if answer.reason is None:
         return f"{head}: accepted"
     return f"{head}: refused: {reason_words(answer.reason)}"

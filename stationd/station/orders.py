@@ -205,6 +205,8 @@ class OrderRules(FaultRules):
                 assert self.matcher is not None  # noqa: S101 - _unhold found a hold
                 if cmd.bolt not in self.matcher.done:   # (its OK recorded since: known)
                     self._check_first.add(cmd.bolt)
+                else:   # done before its hold (a rundown after its OK held it): stays done
+                    ended["done"] = True
                 self._loosen_unknown(cmd.bolt)
             locked = self.matcher.locked.pop(cmd.bolt, None) \
                 if self.matcher is not None and self.vin == cmd.vin else None

@@ -8,7 +8,10 @@ from __future__ import annotations
 
 from drivers.keeper import FaultKind
 from stationd.station.actions import Record, StoreCutUnknown, StoreUnattributed
+from stationd.station.commands import ReleaseBolt
 from stationd.station.inputs import CaughtUp, DeviceBack, DeviceFault, ResultIn
+from stationd.words import answer_words
+from tests.station.test_commands import SUPERVISOR, _answer
 from tests.station.test_core import Driver, _on, _ready
 from tests.station.test_result_types import _enabled, res
 
@@ -185,3 +188,18 @@ def test_the_retry_fetched_after_the_tool_went_on_again_turns_it_off():
     assert not d.core.tool_on
     _on(d, 1, 3)
     assert not d.core.tool_on and not d.tool
+
+
+def test_releasing_the_hold_of_a_bolt_done_before_it_says_it_stays_done():
+    """A re-check's minor finding: B1 done OK, then held by a second rundown of the cut;
+    its release answered "B1 is open to be tightened again", and the station then refused
+    it as already done.  The answer says it stays done."""
+    d = _ready()
+    t0 = _cut_with_its_rundown(d)
+    d.feed(ResultIn(d.t, res(42, 1, True, 1), fetched=True, follows=40, made_at=t0 + 6.0))
+    d.feed(CaughtUp(d.t, True, "", 1))
+    words = answer_words(_answer(d.command(1, ReleaseBolt("VIN1", "B1", "checked"),
+                                           SUPERVISOR)).answer)
+    assert words.endswith(": B1 stays done (its OK result recorded)"), words
+    assert "open to be tightened again" not in words
+    assert d.core.matcher is not None and "B1" in d.core.matcher.done
