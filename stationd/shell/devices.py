@@ -92,7 +92,7 @@ class Devices:
             for cam in cams:
                 quiet(cam.close)
             raise _both(failed)
-        said(name, pc.left, pc.right, cams)
+        journal_cameras(name, pc.left, pc.right, cams)
         # unnamed: the station says the pair's name before its reason
         return Pair(cams, StereoGrabber(cams[0], cams[1], pc.max_skew_s, name=""))
 
@@ -106,10 +106,10 @@ class Devices:
         if problem is not None:
             raise ProtocolError(problem)
         pc = self.cfg.pairs[name]
-        said(name, pc.left or "left", pc.right or "right", pair.cams)
+        journal_cameras(name, pc.left or "left", pc.right or "right", pair.cams)
 
 
-def said(pair: str, left: str, right: str, cams: list[CameraDevice]) -> None:
+def journal_cameras(pair: str, left: str, right: str, cams: list[CameraDevice]) -> None:
     """Each camera of ``pair`` as it says it is (model, serial number, interface, pixel
     format and size), journaled as it opens or comes back: a technician's trial found the
     controller's serial in the journal and no camera's, so a camera replaced (or plugged

@@ -34,11 +34,6 @@ class FaultRules(TeachRules):
         if ev.device == WRENCH:
             self._vin_pending = False
             self._link_lost_at = ev.t
-            if ev.kind is not FaultKind.REFUSED and self._cut_closed is not None \
-                    and self._cut_closed[2] is None:
-                # a refusal keeps the link and its catch-up; one restored at the start waits
-                # for the first catch-up (the controller may be down at the start)
-                self._cut_closed = None
             if self._enabled is not None and self._enabled_at is not None and self._cut is None \
                     and self._result_owed(ev.t) and ev.kind is not FaultKind.REFUSED:
                 # the tool's result may come only after the reconnect: where it belongs is

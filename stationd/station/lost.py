@@ -521,8 +521,10 @@ class LostRules(NokRules):
         if pset == cut.selection.pset:
             return self._cut_unknown(ev.t, f"tightening {tid} may be its own (not proved by "
                                            "the controller's data)")
-        if ev.made_at is not None and ev.made_at < cut.enabled_at - CLOCK_SLACK_S:
-            return []
+        if ev.made_at is not None and not (
+                cut.enabled_at - CLOCK_SLACK_S <= ev.made_at
+                <= max(self._link_back_at, cut.cut_at) + CLOCK_SLACK_S):
+            return []   # before the enable, or after the link was back: not the cut's
         return self._cut_unknown(ev.t, other_pset_note(tid, pset, cut.selection.pset))
 
     def _on_caught_up(self, ev: CaughtUp) -> list[Action]:
@@ -531,10 +533,16 @@ class LostRules(NokRules):
         complete one fetched what an earlier cut's controller could still send late."""
         if ev.complete:
             self._cut_unsettled = None
-        self._cut_closed = None          # its catch-up over: what comes now was made since
+        # its catch-up over: what comes now was made since.  One that did not fetch every
+        # result after a cut's proved rundown leaves that bolt's not known (the tool may
+        # have run again on it: a reviewer, left ending NOK, its retry never fetched)
+        closed, self._cut_closed = self._cut_closed, None
+        acts = [] if ev.complete or closed is None else self._cut_unknown(
+            ev.t, f"results after its rundown {closed[1]} not all fetched "
+                  f"({ev.reason or 'the catch-up did not end'})", closed[0])
         if ev.restarted:    # the gaps told are the old count's: their ids are new rundowns
             self._gaps_told, self._cut_unsettled = [], None
-        return self._end_wait(ev.t) + self._cut_caught_up(ev)
+        return acts + self._end_wait(ev.t) + self._cut_caught_up(ev)
 
     def _cut_caught_up(self, ev: CaughtUp) -> list[Action]:
         """The catch-up after a reconnect ended.  A link cut's result still owed was not among

@@ -324,13 +324,15 @@ class ResultRules(UnreadRules):
         en, tid = cut.selection, int(r.tightening_id)
         echoed = str(r.vin or "").strip()
         # (``by``: restored at a start, when the cut's rundown was stored: one made later
-        # is not that catch-up's, its time not known, not known to be)
+        # is not that catch-up's; its time not known, it may be: held, the safe side)
         if en.pset is None or tid <= after or (echoed and echoed != en.vin) \
                 or (ev.made_at is not None and ev.made_at < cut.enabled_at - CLOCK_SLACK_S) \
-                or (by is not None and (ev.made_at is None
-                                        or ev.made_at > by + CLOCK_SLACK_S)):
+                or (by is not None and ev.made_at is not None
+                    and ev.made_at > by + CLOCK_SLACK_S):
             return []
         self._cut_closed = None          # held once
+        # (untyped, its kind by what was sent for the cut's enable, not the enable on now)
+        kind = result_kind(type_code(r), en.loosen)
         what = "a loosening" if kind is ResultKind.LOOSENING and not en.loosen \
             else "a rundown"
         # (of another pset: the controller's own program selected, the tool still on; a

@@ -64,9 +64,13 @@ class ToolRules(FaultRules):
                     and ev.exposure_t > self._acked_at and self.bolt is not None:
                 sel = self._selection
                 assert sel is not None  # noqa: S101 - a bolt is selected
-                if self._cut is not None:    # (also of a car that left: a reviewer)
+                # (also of a car that left: a reviewer); and while the catch-up that proved
+                # a cut's rundown still fetches (a rundown made after it may hold that bolt:
+                # a reviewer, the tool went on for the retry and it was run down twice)
+                cut = self._cut or (self._cut_closed[0] if self._cut_closed else None)
+                if cut is not None:
                     self.reason = StateReason(Because.CUT_OWED, bolt=self.bolt,
-                                              owed=self._named(self._cut.selection))
+                                              owed=self._named(cut.selection))
                     return acts
                 acts += self._window_over(ev.t)
                 owed = self._owed_elsewhere(ev.t)

@@ -7,8 +7,9 @@ may be it: never left as the first rundown said without a word."""
 from __future__ import annotations
 
 from drivers.keeper import FaultKind
-from stationd.station.actions import Record, StoreCutUnknown, StoreUnattributed
+from stationd.station.actions import Record, SendParams, StoreCutUnknown, StoreUnattributed
 from stationd.station.commands import ReleaseBolt
+from stationd.station.events import Because
 from stationd.station.inputs import CaughtUp, DeviceBack, DeviceFault, ResultIn
 from stationd.words import answer_words
 from tests.station.test_commands import SUPERVISOR, _answer
@@ -172,22 +173,82 @@ def test_a_refused_command_during_the_catch_up_keeps_the_loosening_s_hold():
     assert d.core.matcher is not None and "B1" in d.core.matcher.held
 
 
-def test_the_retry_fetched_after_the_tool_went_on_again_turns_it_off():
-    """The same, with frames between the two fetches (the catch-up fetches one result at a
-    time while the cameras go on): B1's NOK recorded, its tool goes on again for the retry
-    before 42 is fetched.  42 then holds B1: the tool goes off at once (never on for a held
-    bolt)."""
+def test_the_tool_stays_off_until_the_catch_up_that_proved_the_cut_s_rundown_ends():
+    """Frames between the catch-up's fetches (it fetches one result at a time while the
+    cameras go on): B1's NOK recorded, the wrench still on B1.  A reviewer: the tool went
+    on for the retry before 42 (the retry made during the cut) was fetched; the operator
+    ran B1 down again, done, then 42 held it.  The tool stays off (B1 and every other bolt)
+    until the catch-up ends: then held by 42; with nothing more fetched, on for the retry."""
+    for more in (True, False):
+        d = _ready()
+        t0 = _cut_with_its_rundown(d, ok=False)
+        n = len(d.log)
+        _on(d, 1, 2)
+        sent = [a for _, acts in d.log[n:] for a in acts if isinstance(a, SendParams)]
+        if sent:
+            d.step(("ack", 0.01, True))
+        _on(d, 1, 3)
+        assert not d.core.tool_on and not d.tool
+        assert d.core.reason.kind is Because.CUT_OWED
+        if more:
+            d.feed(ResultIn(d.t, res(42, 1, True, 1), fetched=True, follows=40,
+                            made_at=t0 + 6.0))
+        d.feed(CaughtUp(d.t, True, "", 1))
+        _on(d, 1, 3)
+        m = d.core.matcher
+        assert m is not None and ("B1" in m.held) is more
+        assert d.core.tool_on is (not more)
+
+
+def test_a_second_cut_during_the_catch_up_keeps_the_watch():
+    """A reviewer: the link lost again between the catch-up's fetches (no end of that
+    catch-up is told; the next one fetches the rest) cleared the watch: the retry fetched
+    by the next catch-up was stored as no bolt's, B1 ending NOK, its tool on again."""
     d = _ready()
     t0 = _cut_with_its_rundown(d, ok=False)
-    _enabled(d, 1)                         # on again for the retry
-    acts = d.feed(ResultIn(d.t, res(42, 1, True, 1), fetched=True, follows=40,
+    d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "link lost"))
+    d.t += 3.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=2))
+    d.t += 0.1
+    acts = d.feed(ResultIn(d.t, res(42, 1, True, 1), fetched=True, follows=41,
                            made_at=t0 + 6.0))
-    acts += d.feed(CaughtUp(d.t, True, "", 1))
-    m = d.core.matcher
-    assert m is not None and "B1" in m.held
-    assert not d.core.tool_on
+    acts += d.feed(CaughtUp(d.t, True, "", 2))
+    assert [(a.vin, a.bolt) for a in acts if isinstance(a, StoreCutUnknown)] == [
+        ("VIN1", "B1")]
     _on(d, 1, 3)
     assert not d.core.tool_on and not d.tool
+
+
+def test_a_catch_up_that_did_not_fetch_everything_after_the_cut_s_rundown_holds_it():
+    """A reviewer: the catch-up ended incomplete (a fetch refused, the link lost) after the
+    cut's rundown was proved: a retry made during the cut may be among those not fetched;
+    B1 was left ending NOK, its tool on again.  Held; a complete one holds nothing."""
+    for complete in (False, True):
+        d = _ready()
+        _cut_with_its_rundown(d, ok=False)
+        acts = d.feed(CaughtUp(d.t, complete, "" if complete else "MID 0064 refused", 1))
+        m = d.core.matcher
+        assert m is not None and ("B1" in m.held) is not complete
+        if not complete:
+            assert [a.bolt for a in acts if isinstance(a, StoreCutUnknown)] == ["B1"]
+            assert "not all fetched (MID 0064 refused)" in m.held["B1"]
+
+
+def test_another_pset_s_result_made_after_the_link_came_back_holds_nothing():
+    """A reviewer: a result of another pset made after the reconnect (the tool off again:
+    the controller's own panel) held the cut's bolt.  Not the cut's: its bolt's result is
+    still owed (held when the catch-up ends without it)."""
+    d = _ready()
+    d.feed(ResultIn(d.t, res(40, 2, True, 1)))
+    _enabled(d, 1)
+    d.t += 10.0
+    d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "link lost"))
+    d.t += 5.0
+    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    back = d.t
+    d.t += 8.0
+    d.feed(ResultIn(d.t, res(41, 3, True, 1), fetched=True, follows=40, made_at=back + 6.0))
+    assert d.core.matcher is not None and "B1" not in d.core.matcher.held
 
 
 def test_releasing_the_hold_of_a_bolt_done_before_it_says_it_stays_done():
