@@ -198,6 +198,13 @@ class LiftRules(FaultRules):
             loosening = held_a_loosening(under, pset, k in self._loosen)
             sent = under.pset if under.pset is not None else self.nok.rule(k, pset).loosen_pset
             self._held(k, note, loosening, sent)
+        # a hold this core decided while the vehicle was not loaded, its store raced by the
+        # load's read: held all the same (the store makes it the database's too)
+        away, self._held_away = self._held_away, {}
+        for (vin, k), (note, en) in away.items():
+            if vin == ev.vin and k in ev.bolts and k not in self.matcher.held \
+                    and k not in self.matcher.skipped:
+                self._held(k, note, en.loosen, en.pset)
 
     def _loosen_back(self, ev: VehicleLoaded) -> None:
         """The loosen strategy's state comes back with the vehicle: a bolt whose last rundown

@@ -276,6 +276,7 @@ class LostRules(NokRules):
             note = note_of(u)
             stored = StoreCutUnknown(en.vin, b, note, en, what=LOST_UNKNOWN, tightening_id=tid)
             if en.vin != self.vin or self.matcher is None:
+                self._held_away[(en.vin, b)] = (note, en)
                 acts += [stored, Publish(Notice(Said.CUT_UNKNOWN, bolt=b, vin=en.vin, note=note,
                                                 t=t))]
             else:
@@ -580,6 +581,7 @@ class LostRules(NokRules):
         stored = StoreCutUnknown(en.vin, en.bolt, note, en)
         if self.matcher is None or self.vin != en.vin or en.bolt not in self.matcher.bolts:
             # held when that vehicle is at the station again
+            self._held_away[(en.vin, en.bolt)] = (note, en)
             return [stored, Publish(Notice(Said.CUT_UNKNOWN, bolt=en.bolt, vin=en.vin,
                                            note=note, t=t))]
         return [stored, *self._hold_unknown(t, en.bolt, note, en)]

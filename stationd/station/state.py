@@ -306,6 +306,11 @@ class CoreState:
     #: (and, restored at a start, the time its rundown was stored: one made later is not the
     #: cut's; None: this station's own catch-up)
     _cut_closed: tuple[_Cut, int, float | None] | None = field(default=None, repr=False)
+    #: holds decided for a vehicle not loaded at the station (stored, and said), until the
+    #: next vehicle loads: that load's read of the database may have come before the hold
+    #: was stored (a reviewer: a restart's catch-up held a bolt as its vehicle was loading)
+    _held_away: dict[tuple[str, str], tuple[str, Selection]] = field(default_factory=dict,
+                                                                      repr=False)
     _judged_at: float = field(default=float("-inf"), repr=False)   # when it came
     # the station's start or the controller's last fault: a result fetched afterwards was
     # made before it, so never under an enable that came later

@@ -111,3 +111,26 @@ def test_a_last_rundown_made_with_the_link_up_is_owed_nothing(tmp_path: Path) ->
     assert records.owed(late_result_s=5.0) is None
     assert records.repo is not None
     records.repo.close()
+
+
+def test_a_hold_decided_as_its_vehicle_loads_is_kept_when_the_load_read_first(
+        tmp_path: Path) -> None:
+    """A reviewer: the restart's catch-up held B1 while VIN1 was loading; the load's read of
+    the database came before the hold was stored, and B1 came up open.  The core keeps the
+    holds it decided for a vehicle not loaded until the next load, and applies them."""
+    records = _stopped_after_the_cut_s_rundown(tmp_path)
+    owed = records.owed(late_result_s=5.0)
+    assert owed is not None and owed.cut_rundown is not None
+    core = StationCore(PARAMS, leave_frames=2)
+    core.resume(owed)
+    core.feed(Started(time.time()))
+    core.feed(DeviceBack(time.time(), "wrench", reconnects=0))
+    loaded = records.load_vehicle(LoadVehicle(12, "VIN1"))   # read before the hold is stored
+    assert isinstance(loaded, VehicleLoaded) and "B1" not in loaded.held
+    acts = core.feed(ResultIn(time.time(), _result(8), fetched=True, follows=7,
+                              made_at=owed.cut_rundown[1] - 1.0))
+    assert [(a.vin, a.bolt) for a in acts if isinstance(a, StoreCutUnknown)] == [("VIN1", "B1")]
+    core.feed(loaded)
+    assert "B1" not in core.allowed() and "B1" in core.status().held
+    assert records.repo is not None
+    records.repo.close()
