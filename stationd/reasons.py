@@ -204,6 +204,8 @@ class UnprovedKind(enum.StrEnum):
     OUTSIDE_CUT = "outside cut"          # made outside the enable and the cut (bolt)
     NO_CUT = "no cut"                    # no enable left without its result by the link cut
     #                                      (none was on, or its result is in already)
+    RAN_AGAIN = "ran again"              # after the cut's rundown (follows) of bolt, made
+    #                                      during the same cut: the tool ran again (held)
 
 
 @dataclass(frozen=True)

@@ -216,6 +216,9 @@ _UNPROVED: dict[UnprovedKind, Callable[[Unproved], str]] = {
     UnprovedKind.OUTSIDE_CUT: lambda u: f"made outside the enable of {u.bolt} and the link cut",
     UnprovedKind.NO_CUT: lambda u: ("no tool enable left without its result by the link "
                                     "cut"),
+    UnprovedKind.RAN_AGAIN: lambda u: (f"made during the link cut after {u.bolt}'s rundown "
+                                       f"{u.follows}: the tool ran again, on {u.bolt} or "
+                                       f"another bolt; {u.bolt} held"),
 }
 
 

@@ -580,6 +580,9 @@ UNPROVED_WORDS = [
     (Unproved(UnprovedKind.OUTSIDE_CUT, bolt="B1"),
      "made outside the enable of B1 and the link cut"),
     (Unproved(UnprovedKind.NO_CUT), "no tool enable left without its result by the link cut"),
+    (Unproved(UnprovedKind.RAN_AGAIN, bolt="B1", follows=41),
+     "made during the link cut after B1's rundown 41: the tool ran again, on B1 or another "
+     "bolt; B1 held"),
 ]
 
 

@@ -306,9 +306,10 @@ class Records:
             return None
         en = done.enable
         self.log.info("the last rundown recorded (tightening %d, bolt %s of %s) was made "
-                      "during a link cut: a later one the controller made before it was "
-                      "stored, fetched now (the stop may have cut its catch-up short), holds "
-                      "that bolt", done.tightening_id, en.bolt, en.vin)
+                      "during a link cut, and its catch-up may have been cut short by the "
+                      "stop: the tool stays off until the controller's results are fetched; "
+                      "one it made before that rundown was stored holds %s",
+                      done.tightening_id, en.bolt, en.vin, en.bolt)
         return Owed(_selection(en), en.enabled_at.timestamp(), en.enabled_at.timestamp(),
                     in_window=False,
                     cut_rundown=(done.tightening_id, done.recorded_at.timestamp()))

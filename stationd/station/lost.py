@@ -521,12 +521,13 @@ class LostRules(NokRules):
         tid, pset = int(r.tightening_id), int(r.pset)
         if pset == cut.selection.pset:
             return self._cut_unknown(ev.t, f"tightening {tid} may be its own (not proved by "
-                                           "the controller's data)")
+                                           "the controller's data)", tid=tid)
         if ev.made_at is not None and not (
                 cut.enabled_at - CLOCK_SLACK_S <= ev.made_at
                 <= max(self._link_back_at, cut.cut_at) + CLOCK_SLACK_S):
             return []   # before the enable, or after the link was back: not the cut's
-        return self._cut_unknown(ev.t, other_pset_note(tid, pset, cut.selection.pset))
+        return self._cut_unknown(ev.t, other_pset_note(tid, pset, cut.selection.pset),
+                                 tid=tid)
 
     def _on_caught_up(self, ev: CaughtUp) -> list[Action]:
         """:meth:`_cut_caught_up`; a pushed result waited for since ids it skipped were told
@@ -570,15 +571,18 @@ class LostRules(NokRules):
             self._enabled = None
         return [SettleEnable(cut.selection), said]
 
-    def _cut_unknown(self, t: float, why: str, cut: _Cut | None = None) -> list[Action]:
+    def _cut_unknown(self, t: float, why: str, cut: _Cut | None = None,
+                     tid: int | None = None) -> list[Action]:
         """The link cut's bolt held (its result not known: ``why``); the cut ends.  ``cut``:
-        one whose rundown was recorded already (:meth:`_cut_closed`), else the one open."""
+        one whose rundown was recorded already (:meth:`_cut_closed`), else the one open;
+        ``tid``: the result stored unattributed that may be its own (an outcome entered for
+        the bolt is that result: a supervisor's trial counted one tightening twice)."""
         cut = cut or self._cut
         assert cut is not None  # noqa: S101 - the callers' guard
         en = cut.selection
         self._answered(en)
         note = cut_unknown_note(why, en.pset, cut.enabled_at)
-        stored = StoreCutUnknown(en.vin, en.bolt, note, en)
+        stored = StoreCutUnknown(en.vin, en.bolt, note, en, tightening_id=tid)
         if self.matcher is None or self.vin != en.vin or en.bolt not in self.matcher.bolts:
             # held when that vehicle is at the station again
             self._held_away[(en.vin, en.bolt)] = (note, en)
@@ -594,6 +598,26 @@ class LostRules(NokRules):
         if self._cut is not None and self._cut.selection is en:
             self._cut = None
 
+    def _ran_again_of(self, ev: ResultIn) -> tuple[_Cut, int] | None:
+        """The link cut whose proved rundown (its id) ``ev`` was fetched after, by the same
+        catch-up, made after it: of that enable's vehicle (where it echoes one), a later id,
+        not before the enable by its own time (and, watched again after a stop, not after
+        that rundown was stored); else None.  See :meth:`ResultRules._ran_again_after_cut`."""
+        closed, r = self._cut_closed, ev.result
+        if closed is None or not ev.fetched or ev.live:
+            return None
+        cut, after, by = closed
+        en, tid = cut.selection, int(r.tightening_id)
+        echoed = str(r.vin or "").strip()
+        # (``by``: restored at a start, when the cut's rundown was stored: one made later
+        # is not that catch-up's; its time not known, it may be: held, the safe side)
+        if en.pset is None or tid <= after or (echoed and echoed != en.vin) \
+                or (ev.made_at is not None and ev.made_at < cut.enabled_at - CLOCK_SLACK_S) \
+                or (by is not None and ev.made_at is not None
+                    and ev.made_at > by + CLOCK_SLACK_S):
+            return None
+        return cut, after
+
     def _made_during_cut(self, ev: ResultIn) -> tuple[Selection | None, Unproved | None]:
         """The selection a result fetched after a link cut belongs to, when the controller's
         own data proves it (its pset the one sent, its VIN the one sent where it echoes one,
@@ -604,6 +628,11 @@ class LostRules(NokRules):
         if not ev.fetched:
             return None, None
         if cut is None:   # after a reconnect, said (a quality trial: no word of why)
+            again = self._ran_again_of(ev)
+            if again is not None:   # (a supervisor's trial: "no tool enable left" beside
+                # the hold that named it)
+                return None, Unproved(UnprovedKind.RAN_AGAIN, bolt=again[0].selection.bolt,
+                                      follows=again[1])
             return None, None if ev.live else Unproved(UnprovedKind.NO_CUT)
         en = cut.selection
         echoed = str(r.vin or "").strip()

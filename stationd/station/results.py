@@ -305,31 +305,23 @@ class ResultRules(UnreadRules):
             tid, int(r.pset), int(en.pset or 0)), tid)
 
     def _ran_again_after_cut(self, ev: ResultIn, kind: ResultKind) -> list[Action]:
-        """A rundown fetched after the rundown of a link cut's bolt was proved and recorded,
-        by the same catch-up: of that enable's vehicle (where it echoes one), made
-        after it (a later id, and not before the enable by its own time).  The tool, still
-        enabled on the controller during the cut (the station cannot turn it off), ran
-        again, with that pset or another the controller selected itself: on the cut's bolt
-        (the operator's retry after a NOK, or a second hit), or on another bolt.  Never left
-        as the first rundown said, without a word: the cut's bolt, the one the operator was
-        at, held for a person, stored so.  A review
-        held it for a loosening only (done OK, the loosening stored as no bolt's); an
-        integrator's trial with an independent controller: a NOK then an OK during one cut
-        left the bolt "ending NOK", its OK stored as no bolt's, and its tool went on again
-        (tightened twice)."""
-        closed, r = self._cut_closed, ev.result
-        if closed is None or kind is ResultKind.EVENT or not ev.fetched or ev.live:
+        """A rundown fetched after the rundown of a link cut's bolt was proved and recorded
+        (:meth:`_ran_again_of`).  The tool, still enabled on the controller during the cut
+        (the station cannot turn it off), ran again, with that pset or another the
+        controller selected itself: on the cut's bolt (the operator's retry after a NOK, or
+        a second hit), or on another bolt.  Never left as the first rundown said, without a
+        word: the cut's bolt, the one the operator was at, held for a person, stored so,
+        naming the result (an outcome entered for the bolt is that result: one tightening,
+        not two).  A review held it for a loosening only (done OK, the loosening stored as
+        no bolt's); an integrator's trial with an independent controller: a NOK then an OK
+        during one cut left the bolt "ending NOK", its OK stored as no bolt's, and its tool
+        went on again (tightened twice)."""
+        found = self._ran_again_of(ev) if kind is not ResultKind.EVENT else None
+        if found is None:
             return []
-        cut, after, by = closed
-        en, tid = cut.selection, int(r.tightening_id)
-        echoed = str(r.vin or "").strip()
-        # (``by``: restored at a start, when the cut's rundown was stored: one made later
-        # is not that catch-up's; its time not known, it may be: held, the safe side)
-        if en.pset is None or tid <= after or (echoed and echoed != en.vin) \
-                or (ev.made_at is not None and ev.made_at < cut.enabled_at - CLOCK_SLACK_S) \
-                or (by is not None and ev.made_at is not None
-                    and ev.made_at > by + CLOCK_SLACK_S):
-            return []
+        cut, after = found
+        r, en = ev.result, cut.selection
+        tid = int(r.tightening_id)
         self._cut_closed = None          # held once
         # (untyped, its kind by what was sent for the cut's enable, not the enable on now)
         kind = result_kind(type_code(r), en.loosen)
@@ -340,7 +332,7 @@ class ResultRules(UnreadRules):
         which = "of its pset" if int(r.pset) == en.pset else f"of pset {int(r.pset)}"
         return self._cut_unknown(ev.t, f"tightening {tid}, {what} {which} made during the "
                                        f"link cut after its rundown {after}, may be its own "
-                                       "again or another bolt's", cut)
+                                       "again or another bolt's", cut, tid)
 
     def _controller_event(self, ev: ResultIn, kind: ResultKind,
                           held: Selection | None = None) -> list[Action]:

@@ -11,7 +11,7 @@ from stationd.station.actions import Record, SendParams, StoreCutUnknown, StoreU
 from stationd.station.commands import ReleaseBolt
 from stationd.station.events import Because
 from stationd.station.inputs import CaughtUp, DeviceBack, DeviceFault, ResultIn
-from stationd.words import answer_words
+from stationd.words import answer_words, unattributed_words
 from tests.station.test_commands import SUPERVISOR, _answer
 from tests.station.test_core import Driver, _on, _ready
 from tests.station.test_result_types import _enabled, res
@@ -72,6 +72,15 @@ def test_a_second_tightening_of_its_pset_after_the_cut_s_rundown_holds_the_cut_s
             ("VIN1", "B1")], code
         assert d.core.matcher is not None and "B1" in d.core.matcher.held
         assert "tightening 42, a rundown of its pset" in d.core.matcher.held["B1"]
+        # stored naming 42 (an outcome entered for B1 is that result: a supervisor's trial
+        # counted one tightening twice), and 42's own reason says why, as the hold does
+        [held] = [a for a in acts if isinstance(a, StoreCutUnknown)]
+        assert held.tightening_id == 42
+        if code == 1:
+            [loose] = [a for a in acts if isinstance(a, StoreUnattributed)]
+            assert unattributed_words(loose.why) == (
+                "result 42 (pset 1) fetched after a reconnect (made during the link cut after "
+                "B1's rundown 41: the tool ran again, on B1 or another bolt; B1 held)")
 
 
 def test_an_ok_after_the_cut_s_nok_holds_its_bolt_and_its_tool_stays_off():

@@ -469,15 +469,24 @@ def test_a_result_made_during_a_cut_is_recorded_to_its_bolt_when_the_controller_
     assert any("made during the link cut" in m for m in _notices(acts))
     assert [(n.said, n.tightening_id, n.bolt) for n in published(acts, Notice)] == [
         (Said.CUT_RECORDED, 41, "B1")]
-    # the second result of that cut: the cut's enable has its result; said why (a quality
-    # trial: the reason said nothing)
+    # the second result of that cut: the cut's enable has its result, the tool ran again
+    # (B1 held); said why (a quality trial: the reason said nothing; a supervisor's: it said
+    # "no tool enable left" beside the hold that named it)
     acts = d.feed(ResultIn(d.t, res(42, sent.selection.pset or 0, True, 1, vin="VIN1"),
                            fetched=True, follows=40, made_at=cut_at - 0.2))
     assert [type(a) for a in acts if isinstance(a, Record | StoreUnattributed)] == \
         [StoreUnattributed]
     [loose] = [a for a in acts if isinstance(a, StoreUnattributed)]
     assert unattributed_words(loose.why) == (
-        "result 42 (pset 1) fetched after a reconnect (no tool enable left without its result "
+        "result 42 (pset 1) fetched after a reconnect (made during the link cut after B1's "
+        "rundown 41: the tool ran again, on B1 or another bolt; B1 held)")
+    # after its catch-up, one fetched (a gap the next one fills) is said as before
+    d.feed(CaughtUp(d.t, True, "", 1))
+    acts = d.feed(ResultIn(d.t, res(43, sent.selection.pset or 0, True, 1, vin="VIN1"),
+                           fetched=True, follows=42, made_at=cut_at - 0.1))
+    [loose] = [a for a in acts if isinstance(a, StoreUnattributed)]
+    assert unattributed_words(loose.why) == (
+        "result 43 (pset 1) fetched after a reconnect (no tool enable left without its result "
         "by the link cut)")
 
 
