@@ -408,3 +408,29 @@ def test_an_entered_outcome_carries_the_controller_s_time_of_the_result_it_is(se
     _enter(repo)
     [b1] = [r for r in Results(repo).export("VIN1") if r["bolt"] == "B1" and r["status"] == "ok"]
     assert b1["entered_by"] == "sam" and b1["controller_at"] == made.isoformat()
+
+
+def test_an_outcome_entered_for_a_link_cut_hold_naming_a_result_is_that_result(sedan):
+    """A supervisor's trial: a retry made during a link cut (tightening 42), stored
+    unattributed, held B1 (a link cut's hold, naming it); the OK they entered for B1 and 42
+    were counted as two tightenings.  The hold stored with 42's id: the entered rundown
+    carries 42 and the unattributed one says whose outcome it became."""
+    from db.kinds import CUT_UNKNOWN, cut_unknown_note
+
+    repo = sedan
+    repo.others.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=42, pset=1,
+                                    ok=True, torque_nm=51.2, angle_deg=26.0,
+                                    result_at=datetime(2026, 12, 1, 8, 0, 0, tzinfo=UTC),
+                                    reason="fetched after a reconnect")
+    repo.others.record_controller_event(
+        result_type=0, what=CUT_UNKNOWN, vin="VIN1", bolt="B1", controller_vin=None,
+        tightening_id=42, pset=1, ok=None, torque_nm=None, angle_deg=None, result_at=None,
+        note=cut_unknown_note("tightening 42, a rundown of its pset made during the link cut "
+                              "after its rundown 41, may be its own again or another bolt's",
+                              1, 1_764_576_000.0))
+    rid = _enter(repo, bolt="B1")
+    run = next(e["record"] for e in repo.ledger.since(0) if e["kind"] == RUNDOWN
+               and e["record"]["id"] == rid)
+    assert run["tightening_id"] == 42
+    [loose] = repo.others.unattributed("VIN1")
+    assert loose["entered_as"] == {"bolt": "B1", "by": "sam"}
