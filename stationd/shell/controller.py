@@ -290,6 +290,11 @@ class ControllerFeed:
         except STATION_FAULTS as exc:
             log.error("results missed while the link was down not fetched: %s", one_line(exc))
             why = f"the station's database failed ({one_line(exc)})"
+        except Exception as exc:   # a driver's bug: still told, the core's watch ends (a
+            # reviewer: the tool stayed off for every bolt until the next reconnect)
+            log.error("results missed while the link was down not fetched: the catch-up "
+                      "crashed", exc_info=exc)
+            why = f"the catch-up failed ({type(exc).__name__}: {one_line(exc)})"
         await self._feed(CaughtUp(time.time(), why is None, why or "", connection,
                                   self._unasked, self._restarted))
 

@@ -526,8 +526,8 @@ class LostRules(NokRules):
                 cut.enabled_at - CLOCK_SLACK_S <= ev.made_at
                 <= max(self._link_back_at, cut.cut_at) + CLOCK_SLACK_S):
             return []   # before the enable, or after the link was back: not the cut's
-        return self._cut_unknown(ev.t, other_pset_note(tid, pset, cut.selection.pset),
-                                 tid=tid)
+        # (no result named: an outcome entered for the bolt is not another program's)
+        return self._cut_unknown(ev.t, other_pset_note(tid, pset, cut.selection.pset))
 
     def _on_caught_up(self, ev: CaughtUp) -> list[Action]:
         """:meth:`_cut_caught_up`; a pushed result waited for since ids it skipped were told
@@ -539,9 +539,12 @@ class LostRules(NokRules):
         # result after a cut's proved rundown leaves that bolt's not known (the tool may
         # have run again on it: a reviewer, left ending NOK, its retry never fetched)
         closed, self._cut_closed = self._cut_closed, None
-        acts = [] if ev.complete or closed is None else self._cut_unknown(
-            ev.t, f"results after its rundown {closed[1]} not all fetched "
-                  f"({ev.reason or 'the catch-up did not end'})", closed[0])
+        # (one watched again after a stop is not held for it: that catch-up may have ended
+        # long before, and each start would hold an old bolt again: a reviewer)
+        acts = [] if ev.complete or closed is None or closed[2] is not None \
+            or self._cut_watch_held else self._cut_unknown(
+                ev.t, f"results after its rundown {closed[1]} not all fetched "
+                      f"({ev.reason or 'the catch-up did not end'})", closed[0])
         if ev.restarted:    # the gaps told are the old count's: their ids are new rundowns
             self._gaps_told, self._cut_unsettled = [], None
         return acts + self._end_wait(ev.t) + self._cut_caught_up(ev)
@@ -610,11 +613,12 @@ class LostRules(NokRules):
         en, tid = cut.selection, int(r.tightening_id)
         echoed = str(r.vin or "").strip()
         # (``by``: restored at a start, when the cut's rundown was stored: one made later
-        # is not that catch-up's; its time not known, it may be: held, the safe side)
+        # is not that catch-up's, and one whose time is not known is not known to be: that
+        # catch-up may have ended long before, a reviewer's old bolt held at every start)
         if en.pset is None or tid <= after or (echoed and echoed != en.vin) \
                 or (ev.made_at is not None and ev.made_at < cut.enabled_at - CLOCK_SLACK_S) \
-                or (by is not None and ev.made_at is not None
-                    and ev.made_at > by + CLOCK_SLACK_S):
+                or (by is not None and (ev.made_at is None
+                                        or ev.made_at > by + CLOCK_SLACK_S)):
             return None
         return cut, after
 
@@ -630,8 +634,10 @@ class LostRules(NokRules):
         if cut is None:   # after a reconnect, said (a quality trial: no word of why)
             again = self._ran_again_of(ev)
             if again is not None:   # (a supervisor's trial: "no tool enable left" beside
-                # the hold that named it)
-                return None, Unproved(UnprovedKind.RAN_AGAIN, bolt=again[0].selection.bolt,
+                # the hold that named it; another vehicle's bolt with its VIN)
+                sel = again[0].selection
+                return None, Unproved(UnprovedKind.RAN_AGAIN, bolt=sel.bolt if sel.vin ==
+                                      self.vin else f"{sel.bolt} of {sel.vin}",
                                       follows=again[1])
             return None, None if ev.live else Unproved(UnprovedKind.NO_CUT)
         en = cut.selection

@@ -212,7 +212,7 @@ class ResultRules(UnreadRules):
         proved, not_proved = self._made_during_cut(ev)
         if proved is not None:
             if self._cut is not None:
-                self._cut_closed = (self._cut, tid, None)
+                self._cut_closed, self._cut_watch_held = (self._cut, tid, None), False
             return self._attribute(ev, proved, cut=True)
         why = Unattributed(UnattributedKind.OUTSIDE if not ev.fetched else
                            UnattributedKind.FETCHED_CHECKED if ev.live and ev.before is None
@@ -317,12 +317,12 @@ class ResultRules(UnreadRules):
         during one cut left the bolt "ending NOK", its OK stored as no bolt's, and its tool
         went on again (tightened twice)."""
         found = self._ran_again_of(ev) if kind is not ResultKind.EVENT else None
-        if found is None:
-            return []
+        if found is None or self._cut_watch_held:
+            return []    # (held once: the watch, and the tool off, last until the catch-up ends)
         cut, after = found
         r, en = ev.result, cut.selection
         tid = int(r.tightening_id)
-        self._cut_closed = None          # held once
+        self._cut_watch_held = True
         # (untyped, its kind by what was sent for the cut's enable, not the enable on now)
         kind = result_kind(type_code(r), en.loosen)
         what = "a loosening" if kind is ResultKind.LOOSENING and not en.loosen \
@@ -330,9 +330,12 @@ class ResultRules(UnreadRules):
         # (of another pset: the controller's own program selected, the tool still on; a
         # trial: a NOK then a rundown of another pset left the bolt ending NOK, its tool on)
         which = "of its pset" if int(r.pset) == en.pset else f"of pset {int(r.pset)}"
+        # (named as the result an outcome entered is, only of the pset sent: a reviewer, an
+        # entered outcome carried another program's result)
         return self._cut_unknown(ev.t, f"tightening {tid}, {what} {which} made during the "
                                        f"link cut after its rundown {after}, may be its own "
-                                       "again or another bolt's", cut, tid)
+                                       "again or another bolt's", cut,
+                                 tid if int(r.pset) == en.pset else None)
 
     def _controller_event(self, ev: ResultIn, kind: ResultKind,
                           held: Selection | None = None) -> list[Action]:

@@ -306,6 +306,8 @@ class CoreState:
     #: (and, restored at a start, the time its rundown was stored: one made later is not the
     #: cut's; None: this station's own catch-up)
     _cut_closed: tuple[_Cut, int, float | None] | None = field(default=None, repr=False)
+    #: that watch held its bolt already (once: its later rundowns are said, not held again)
+    _cut_watch_held: bool = field(default=False, repr=False)
     #: holds decided for a vehicle not loaded at the station (stored, and said), until the
     #: next vehicle loads: that load's read of the database may have come before the hold
     #: was stored (a reviewer: a restart's catch-up held a bolt as its vehicle was loading)
@@ -491,6 +493,7 @@ class CoreState:
             tid, stored = owed.cut_rundown
             at = owed.enabled_at if owed.enabled_at is not None else owed.off_at
             self._cut_closed = (_Cut(owed.selection, at, stored), tid, stored)
+            self._cut_watch_held = False
             return
         if owed.in_window:
             self._enabled, self._off_at = owed.selection, owed.off_at

@@ -138,6 +138,14 @@ def test_a_fetch_that_fails_with_the_link_up_ends_it_incomplete():
                                   "answered with tightening 43)", 1)]
 
 
+def test_a_driver_that_crashes_during_it_ends_it_incomplete(caplog):
+    """A reviewer: an exception no driver should raise (a bug) ended the task without a
+    word: a cut's watch kept the tool off for every bolt until the next reconnect."""
+    fed = catch_up(Controller({0: res(43), 41: KeyError("tightening")}))
+    assert _ends(fed) == [(False, "the catch-up failed (KeyError: 'tightening')", 1)]
+    assert any("the catch-up crashed" in r.getMessage() for r in caplog.records)
+
+
 def test_a_link_lost_again_tells_nothing():
     def lose(ev: Any, keeper: Any) -> None:
         keeper.up = False

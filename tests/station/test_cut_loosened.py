@@ -273,3 +273,42 @@ def test_releasing_the_hold_of_a_bolt_done_before_it_says_it_stays_done():
     assert words.endswith(": B1 stays done (its OK result recorded)"), words
     assert "open to be tightened again" not in words
     assert d.core.matcher is not None and "B1" in d.core.matcher.done
+
+
+def test_the_watch_lasts_until_the_catch_up_ends_after_its_hold():
+    """A reviewer: NOK 41, then 42 and 43 in one cut: 42 held B1 and ended the watch, so 43
+    was said "no tool enable left" and the tool could go on for other bolts before the
+    catch-up ended.  The watch lasts until then (held once, 43 said as the tool running
+    again), the tool off for every bolt meanwhile."""
+    d = _ready()
+    t0 = _cut_with_its_rundown(d, ok=False)
+    acts = d.feed(ResultIn(d.t, res(42, 1, False, 1), fetched=True, follows=40,
+                           made_at=t0 + 5.0))
+    acts += d.feed(ResultIn(d.t, res(43, 1, True, 1), fetched=True, follows=40,
+                            made_at=t0 + 6.0))
+    assert [a.bolt for a in acts if isinstance(a, StoreCutUnknown)] == ["B1"]
+    words = [unattributed_words(a.why) for a in acts if isinstance(a, StoreUnattributed)]
+    assert len(words) == 2 and all("the tool ran again" in w for w in words), words
+    n = len(d.log)
+    _on(d, 2, 2)                           # another bolt: the tool stays off meanwhile
+    sent = [a for _, acts in d.log[n:] for a in acts if isinstance(a, SendParams)]
+    assert [a.bolt for a in sent] == ["B2"]
+    d.step(("ack", 0.01, True))
+    _on(d, 2, 3)
+    assert not d.core.tool_on and d.core.reason.kind is Because.CUT_OWED
+    d.feed(CaughtUp(d.t, True, "", 1))
+    _on(d, 2, 2)
+    assert d.core.tool_on and d.tool
+
+
+def test_another_pset_s_result_is_not_named_as_the_held_bolt_s():
+    """A reviewer: a hold for another program's result stored its id, and an outcome
+    entered for the bolt then carried that result (another program's run).  Named only
+    where its pset is the one sent."""
+    d = _ready()
+    t0 = _cut_with_its_rundown(d, ok=False)
+    acts = d.feed(ResultIn(d.t, res(42, 2, True, 1), fetched=True, follows=40,
+                           made_at=t0 + 6.0))
+    [held] = [a for a in acts if isinstance(a, StoreCutUnknown)]
+    assert held.tightening_id is None
+
