@@ -1,8 +1,9 @@
 """The suite's two speeds: unit and contract tests, and system tests.
 
 ``pytest -m "not system"`` runs the unit and contract tests (a function, a file, a device's
-protocol against its simulator on loopback, the screens' server in the test process): about
-two minutes on two cores (README: the figures).  ``pytest`` runs every test.  A **system
+protocol against its simulator on loopback, the screens' server in the test process): under
+a minute and a half on two cores four at a time (``-n 4``: they wait on devices' timeouts
+much of their time; README: the figures).  ``pytest`` runs every test.  A **system
 test** starts
 
 * a whole daemon: the station's loop (``Station.run``; a station demo runs it too), or
