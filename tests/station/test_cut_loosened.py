@@ -6,6 +6,8 @@ may be it: never left as the first rundown said without a word."""
 
 from __future__ import annotations
 
+from typing import Any
+
 from drivers.keeper import FaultKind
 from stationd.station.actions import Record, SendParams, StoreCutUnknown, StoreUnattributed
 from stationd.station.commands import ReleaseBolt
@@ -17,10 +19,9 @@ from tests.station.test_core import Driver, _on, _ready
 from tests.station.test_result_types import _enabled, res
 
 
-def _cut_with_its_rundown(d: Driver, ok: bool = True) -> float:
-    """40 pushed; B1 (pset 1) enabled; the link dies unnoticed and the operator runs B1
-    down (41, 3 s after the enable); the station sees the cut 10 s after the enable, the
-    link comes back and the catch-up fetches 41 (proved: recorded to B1).  The enable's
+def _cut_and_back(d: Driver) -> float:
+    """40 pushed; B1 (pset 1) enabled; the station sees the link cut 10 s after the
+    enable, and the link comes back 5 s later (its catch-up under way).  The enable's
     time."""
     d.feed(ResultIn(d.t, res(40, 2, True, 1)))
     _enabled(d, 1)
@@ -30,6 +31,24 @@ def _cut_with_its_rundown(d: Driver, ok: bool = True) -> float:
     d.t += 5.0
     d.feed(DeviceBack(d.t, "wrench", reconnects=1))
     d.t += 0.1
+    return t0
+
+
+def _fetched_then_caught_up(d: Driver, r: Any, made_at: float) -> list[Any]:
+    """``r`` fetched by the same catch-up (after 40), which then ends complete: what the
+    core did, checked to have stored a hold of B1 of VIN1 and ``r`` as no bolt's."""
+    acts = d.feed(ResultIn(d.t, r, fetched=True, follows=40, made_at=made_at))
+    acts += d.feed(CaughtUp(d.t, True, "", 1))
+    assert any(isinstance(a, StoreUnattributed) for a in acts)
+    assert [(a.vin, a.bolt) for a in acts if isinstance(a, StoreCutUnknown)] == [
+        ("VIN1", "B1")]
+    return acts
+
+
+def _cut_with_its_rundown(d: Driver, ok: bool = True) -> float:
+    """:func:`_cut_and_back`, the operator having run B1 down during the cut (41, 3 s after
+    the enable): the catch-up fetches 41 (proved: recorded to B1).  The enable's time."""
+    t0 = _cut_and_back(d)
     acts = d.feed(ResultIn(d.t, res(41, 1, ok, 1), fetched=True, follows=40,
                            made_at=t0 + 3.0))
     assert [(a.bolt, int(a.result.tightening_id)) for a in acts
@@ -46,12 +65,7 @@ def test_a_loosening_made_during_the_cut_after_its_rundown_holds_the_cut_s_bolt(
     no bolt."""
     d = _ready()
     t0 = _cut_with_its_rundown(d)
-    acts = d.feed(ResultIn(d.t, res(42, 1, True, 2), fetched=True, follows=40,
-                           made_at=t0 + 6.0))
-    acts += d.feed(CaughtUp(d.t, True, "", 1))
-    assert any(isinstance(a, StoreUnattributed) for a in acts)
-    assert [(a.vin, a.bolt) for a in acts if isinstance(a, StoreCutUnknown)] == [
-        ("VIN1", "B1")]
+    _fetched_then_caught_up(d, res(42, 1, True, 2), t0 + 6.0)
     assert d.core.matcher is not None and "B1" in d.core.matcher.held
     assert "tightening 42" in d.core.matcher.held["B1"]
 
@@ -92,12 +106,7 @@ def test_an_ok_after_the_cut_s_nok_holds_its_bolt_and_its_tool_stays_off():
     tool off, until a person says."""
     d = _ready()
     t0 = _cut_with_its_rundown(d, ok=False)
-    acts = d.feed(ResultIn(d.t, res(42, 1, True, 1), fetched=True, follows=40,
-                           made_at=t0 + 6.0))
-    acts += d.feed(CaughtUp(d.t, True, "", 1))
-    assert any(isinstance(a, StoreUnattributed) for a in acts)
-    assert [(a.vin, a.bolt) for a in acts if isinstance(a, StoreCutUnknown)] == [
-        ("VIN1", "B1")]
+    _fetched_then_caught_up(d, res(42, 1, True, 1), t0 + 6.0)
     m = d.core.matcher
     assert m is not None and "B1" in m.held and "B1" not in m.done
     assert "after its rundown 41" in m.held["B1"]
@@ -146,14 +155,7 @@ def test_a_cut_whose_only_rundown_is_of_another_pset_holds_its_bolt():
     result holds the bolt; so it does after a cut.  One made before the enable does not."""
     for made, held in ((6.0, True), (-10.0, False)):
         d = _ready()
-        d.feed(ResultIn(d.t, res(40, 2, True, 1)))
-        _enabled(d, 1)
-        t0 = d.t
-        d.t += 10.0
-        d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "link lost"))
-        d.t += 5.0
-        d.feed(DeviceBack(d.t, "wrench", reconnects=1))
-        d.t += 0.1
+        t0 = _cut_and_back(d)
         acts = d.feed(ResultIn(d.t, res(41, 3, True, 1), fetched=True, follows=40,
                                made_at=t0 + made))
         acts += d.feed(CaughtUp(d.t, True, "", 1))
@@ -248,12 +250,7 @@ def test_another_pset_s_result_made_after_the_link_came_back_holds_nothing():
     the controller's own panel) held the cut's bolt.  Not the cut's: its bolt's result is
     still owed (held when the catch-up ends without it)."""
     d = _ready()
-    d.feed(ResultIn(d.t, res(40, 2, True, 1)))
-    _enabled(d, 1)
-    d.t += 10.0
-    d.feed(DeviceFault(d.t, "wrench", FaultKind.DOWN, "link lost"))
-    d.t += 5.0
-    d.feed(DeviceBack(d.t, "wrench", reconnects=1))
+    _cut_and_back(d)
     back = d.t
     d.t += 8.0
     d.feed(ResultIn(d.t, res(41, 3, True, 1), fetched=True, follows=40, made_at=back + 6.0))
