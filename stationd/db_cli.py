@@ -21,8 +21,10 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from db.holds import RELEASE
 from db.kinds import (
     CUT_UNKNOWN,
+    ENTER_OUTCOME,
     LOOSENED,
     LOOSENING,
     LOST_UNKNOWN,
@@ -498,8 +500,10 @@ def cmd_db_report(args: argparse.Namespace) -> int:
         holds = dict(report.held)
         for e in events:
             if e["what"] in HOLD_WORDS:    # no result: what the station knows of it
+                now = _held_now(e["bolt"], holds, e["note"] or "", "; ", e["recorded_at"],
+                                commands)
                 print(f"  {HOLD_WORDS[e['what']]} while the tool was on {e['bolt']}: "
-                      f"{e['note']}{_held_now(e['bolt'], holds, e['note'] or '', '; ')}")
+                      f"{e['note']}{now}")
                 continue
             on = f" while the tool was on {e['bolt']}" if e["bolt"] else ""
             # (its type's code unless its words say it: an auditor's trial found the 9 of a
@@ -522,16 +526,28 @@ def cmd_db_report(args: argparse.Namespace) -> int:
 HOLD_WORDS = {CUT_UNKNOWN: "link cut", LOST_UNKNOWN: "a result's push lost"}
 
 
-def _held_now(bolt: str | None, holds: dict[str, str], note: str, sep: str = ", ") -> str:
-    """Of a record that held ``bolt`` with ``note``: whether that hold is on still
-    (``holds``: the bolts held now, each with its note: a later hold of the same bolt is
-    another record's), or ended (released, skipped, its outcome entered: the commands say
-    which)."""
+def _held_now(bolt: str | None, holds: dict[str, str], note: str, sep: str = ", ",
+              since: datetime | None = None, commands: Sequence[Any] = ()) -> str:
+    """Of a record that held ``bolt`` with ``note`` (stored at ``since``): whether that hold
+    is on still (``holds``: the bolts held now, each with its note: a later hold of the same
+    bolt is another record's), or ended, and how: the first release, skip or entered
+    outcome of that bolt since, by whom and when (``commands``, the vehicle's; a
+    supervisor's trial: "held then, no longer", who ended it only in the list above)."""
     if not bolt:
         return ""
     now = holds.get(bolt)       # (a loosening's hold adds ", a loosening ..." to its note)
-    return f"{sep}{bolt} held" if now is not None and (now == note or now.startswith(
-        note + ",")) else f"{sep}{bolt} held then, no longer"
+    if now is not None and (now == note or now.startswith(note + ",")):
+        return f"{sep}{bolt} held"
+    ended = next((c for c in commands if c.bolt == bolt and c.kind in ENDING_WORDS
+                  and (since is None or c.at >= since)), None)
+    if ended is None:
+        return f"{sep}{bolt} held then, no longer"
+    return (f"{sep}{bolt} held then: {ENDING_WORDS[ended.kind]} by {ended.user} at "
+            f"{ended.at:%Y-%m-%d %H:%M:%S} UTC")
+
+
+#: the commands that end a hold, as db report says how one ended
+ENDING_WORDS = {RELEASE: "released", "skip": "skipped", ENTER_OUTCOME: "its outcome entered"}
 
 
 def _why_nok(run: dict[str, Any] | None) -> str:

@@ -1112,6 +1112,23 @@ def test_a_record_says_held_only_for_its_own_hold():
     assert _held_now("B2", holds, "tightening 7", "; ") == "; B2 held"
     assert _held_now("B3", holds, "tightening 2") == ", B3 held then, no longer"
     assert _held_now(None, holds, "x") == ""
+    # how it ended, where the vehicle's commands say (a supervisor's trial: "held then, no
+    # longer", who ended it only in the list of commands): the first one since the hold
+    from datetime import UTC, datetime
+    from types import SimpleNamespace
+
+    at = datetime(2026, 12, 2, 16, 48, 0, tzinfo=UTC)
+    commands = [SimpleNamespace(kind="release", bolt="B1", user="eve",
+                                at=datetime(2026, 12, 2, 16, 40, 0, tzinfo=UTC)),
+                SimpleNamespace(kind="enter-outcome", bolt="B1", user="sam",
+                                at=datetime(2026, 12, 2, 16, 52, 0, tzinfo=UTC)),
+                SimpleNamespace(kind="release", bolt="B3", user="ann",
+                                at=datetime(2026, 12, 2, 16, 53, 0, tzinfo=UTC))]
+    assert _held_now("B1", holds, "tightening 4", "; ", at, commands) == \
+        "; B1 held then: its outcome entered by sam at 2026-12-02 16:52:00 UTC"
+    assert _held_now("B3", holds, "tightening 2", ", ", at, commands) == \
+        ", B3 held then: released by ann at 2026-12-02 16:53:00 UTC"
+    assert _held_now("B1", holds, "tightening 41", "; ", at, commands) == "; B1 held"
     # the station's own holds without a result, each named
     assert set(HOLD_WORDS) == {"result unknown after a link cut",
                                "result unknown after a lost push"}
