@@ -214,6 +214,23 @@ def lost_unknown_id(note: str | None) -> int | None:
     return int(tid) if word == "tightening" and tid.isdigit() else None
 
 
+def held_result_id(note: str | None) -> int | None:
+    """The tightening id a hold names as the result, stored unattributed, that may be the
+    bolt's own (so the bolt may be tightened already): a lost push's
+    (:func:`lost_unknown_id`), or a link cut's of the pset sent ("tightening 42 may be its
+    own", "tightening 42, a rundown of its pset ... after its rundown 41": a supervisor's
+    trial, the release said nothing of the OK stored, and the joint was tightened twice);
+    None for the note of another hold."""
+    found = lost_unknown_id(note)
+    if found is not None or note is None or not note.startswith(CUT_NOTE_HEAD + ": "):
+        return found
+    word, _, rest = note[len(CUT_NOTE_HEAD) + 2:].partition(" ")
+    tid, _, tail = rest.partition(" ")
+    tid = tid.rstrip(",")
+    same = tail.startswith("may be its own") or " of its pset made during the link cut" in tail
+    return int(tid) if word == "tightening" and tid.isdigit() and same else None
+
+
 def loosening_note(note: str, pset: int | None) -> str:
     """A held bolt's note (``note``: which result) where that result came under the bolt's
     loosen pset: the person who reads it on the controller and enters its outcome is told it
@@ -272,6 +289,7 @@ __all__ = [
     "HeldUnder",
     "check_unknown_note",
     "cut_unknown_note",
+    "held_result_id",
     "id_span",
     "is_not_taken_note",
     "is_unknown_note",

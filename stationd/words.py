@@ -13,10 +13,10 @@ from db.kinds import (
     GAP_NOTE_MARK,
     NOK,
     NOT_TAKEN_NOTE,
+    held_result_id,
     id_span,
     is_not_taken_note,
     is_unknown_note,
-    lost_unknown_id,
 )
 from drivers.counting import counted
 from drivers.wrench.base import ResultType
@@ -785,7 +785,7 @@ def _reopened(bolt: str, hold: str | None) -> str:
     tightened again; the operator's screen marks the bolt "check first" alike)."""
     if hold is None:
         return ""
-    tid = lost_unknown_id(hold)
+    tid = held_result_id(hold)
     if tid is not None:
         by = f", by tightening {tid} (stored unattributed)"
     elif GAP_NOTE_MARK in hold:
@@ -807,7 +807,7 @@ def unrecorded_words(hold: str | None, loose: Sequence[Mapping[str, Any]] = ()) 
     result may be tightening 41, stored unattributed."""
     if hold is None:
         return "not tightened"
-    tid = lost_unknown_id(hold)
+    tid = held_result_id(hold)
     if tid is None:
         return "held: no rundown recorded to it, its result not known"
     found = [u for u in loose if u.get("tightening_id") == tid]

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from db.kinds import held_result_id
 from drivers.keeper import FaultKind
 from stationd.station.actions import Record, SendParams, StoreCutUnknown, StoreUnattributed
 from stationd.station.commands import ReleaseBolt
@@ -309,3 +310,24 @@ def test_another_pset_s_result_is_not_named_as_the_held_bolt_s():
     [held] = [a for a in acts if isinstance(a, StoreCutUnknown)]
     assert held.tightening_id is None
 
+
+
+def test_releasing_the_hold_of_a_retry_names_the_result_that_may_have_tightened_it():
+    """A supervisor's trial: B1's NOK, then its retry's OK (42) during one cut, B1 held; the
+    release said nothing of 42, and the joint was tightened twice.  The answer names it,
+    as a lost push's hold's does; another program's result held without naming one."""
+    d = _ready()
+    t0 = _cut_with_its_rundown(d, ok=False)
+    _fetched_then_caught_up(d, res(42, 1, True, 1), t0 + 6.0)
+    words = answer_words(_answer(d.command(1, ReleaseBolt("VIN1", "B1", "checked"),
+                                           SUPERVISOR)).answer)
+    assert words.endswith(": B1 is open to be tightened again, but it may be tightened "
+                          "already, by tightening 42 (stored unattributed): check the "
+                          "controller before tightening it again"), words
+    assert held_result_id("its result during the link cut not known: tightening 42 may be "
+                          "its own (not proved by the controller's data)") == 42
+    assert held_result_id("its result during the link cut not known: tightening 41 came "
+                          "under pset 3 while its tool was on for pset 1: run with another "
+                          "program, or not its own") is None
+    assert held_result_id("its result during the link cut not known: results after its "
+                          "rundown 41 not all fetched (refused)") is None
