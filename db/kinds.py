@@ -214,20 +214,43 @@ def lost_unknown_id(note: str | None) -> int | None:
     return int(tid) if word == "tightening" and tid.isdigit() else None
 
 
+#: how a link cut's hold says the result it names may be its bolt's own (:func:`cut_own_why`,
+#: :func:`ran_again_why`; read back by :func:`held_result_id`)
+MAY_BE_ITS_OWN = "may be its own"
+#: how :func:`ran_again_why` says a rundown of the pset sent came after the cut's
+RAN_AGAIN_OF_ITS_PSET = " of its pset made during the link cut after its rundown "
+
+
+def cut_own_why(tightening_id: int, why: str) -> str:
+    """Why a link cut's bolt is held for tightening ``tightening_id`` (stored unattributed),
+    of the pset sent: it may be its own (``why``: the rest, "(not proved by the controller's
+    data)", "or B05's, made during the link cut and sent late ...")."""
+    return f"tightening {tightening_id} {MAY_BE_ITS_OWN} {why}"
+
+
+def ran_again_why(tightening_id: int, what: str, pset: int | None, after: int) -> str:
+    """Why a link cut's bolt is held for tightening ``tightening_id``, ``what`` ("a
+    rundown", "a loosening") fetched after the cut's proved rundown ``after``: the tool ran
+    again during the cut (``pset``: another program's, None: the pset sent)."""
+    which = RAN_AGAIN_OF_ITS_PSET if pset is None \
+        else f" of pset {pset} made during the link cut after its rundown "
+    return (f"tightening {tightening_id}, {what}{which}{after}, {MAY_BE_ITS_OWN} again or "
+            "another bolt's")
+
+
 def held_result_id(note: str | None) -> int | None:
     """The tightening id a hold names as the result, stored unattributed, that may be the
     bolt's own (so the bolt may be tightened already): a lost push's
-    (:func:`lost_unknown_id`), or a link cut's of the pset sent ("tightening 42 may be its
-    own", "tightening 42, a rundown of its pset ... after its rundown 41": a supervisor's
-    trial, the release said nothing of the OK stored, and the joint was tightened twice);
-    None for the note of another hold."""
+    (:func:`lost_unknown_id`), or a link cut's of the pset sent (:func:`cut_own_why`,
+    :func:`ran_again_why` of its pset: a supervisor's trial, the release said nothing of the
+    OK stored, and the joint was tightened twice); None for the note of another hold."""
     found = lost_unknown_id(note)
     if found is not None or note is None or not note.startswith(CUT_NOTE_HEAD + ": "):
         return found
     word, _, rest = note[len(CUT_NOTE_HEAD) + 2:].partition(" ")
     tid, _, tail = rest.partition(" ")
     tid = tid.rstrip(",")
-    same = tail.startswith("may be its own") or " of its pset made during the link cut" in tail
+    same = tail.startswith(MAY_BE_ITS_OWN) or RAN_AGAIN_OF_ITS_PSET in tail
     return int(tid) if word == "tightening" and tid.isdigit() and same else None
 
 
@@ -272,6 +295,7 @@ __all__ = [
     "LOOSENING",
     "LOST_NOTE_MARK",
     "LOST_UNKNOWN",
+    "MAY_BE_ITS_OWN",
     "MISSING",
     "NOK",
     "NOT_TAKEN",
@@ -279,6 +303,7 @@ __all__ = [
     "OK",
     "OTHER_PSET_MARK",
     "PENDING",
+    "RAN_AGAIN_OF_ITS_PSET",
     "RUNDOWN_KINDS",
     "SKIPPED",
     "TIGHTENING",
@@ -288,6 +313,7 @@ __all__ = [
     "BoltStatus",
     "HeldUnder",
     "check_unknown_note",
+    "cut_own_why",
     "cut_unknown_note",
     "held_result_id",
     "id_span",
@@ -298,6 +324,7 @@ __all__ = [
     "lost_unknown_id",
     "lost_unknown_note",
     "not_taken_note",
+    "ran_again_why",
     "unknown_type_note",
     "unreadable_note",
 ]

@@ -99,13 +99,13 @@ class Devices:
     def reconnect_pair(self, name: str, pair: Pair) -> None:
         """Both cameras back and one grab: back only with frames its calibration describes
         (a DeviceError or ProtocolError otherwise)."""
+        pc = self.cfg.pairs[name]
         for cam in pair.cams:
             cam.reconnect()
         left, right = pair.grabber.grab(1.0)
-        problem = size_problem(self.cfg.pairs[name].calibration, left.image, right.image)
+        problem = size_problem(pc.calibration, left.image, right.image)
         if problem is not None:
             raise ProtocolError(problem)
-        pc = self.cfg.pairs[name]
         journal_cameras(name, pc.left or "left", pc.right or "right", pair.cams)
 
 

@@ -945,9 +945,6 @@ def _aware(t: datetime | None) -> datetime | None:
     return None if t is None else t.astimezone(UTC)
 
 
-__all__ = ["STATION_FAULTS", "Records", "Unsaved", "controller_time", "xyz"]
-
-
 def _selection(owed: OwedEnable) -> Selection:
     """The selection a noted tool enable was made for, as the core took it."""
     j = owed.selection
@@ -955,3 +952,7 @@ def _selection(owed: OwedEnable) -> Selection:
                      float(j["distance_mm"]), float(j["exposure_t"]), float(j["decided_t"]),
                      None, owed.vin, owed.parameters_id, bool(j.get("loosen", False)),
                      j.get("operator"), _window(j.get("torque_window")))
+
+
+__all__ = ["STATION_FAULTS", "Records", "Unsaved", "controller_time", "xyz"]
+

@@ -10,6 +10,7 @@ from collections.abc import Callable
 from db.kinds import (
     LOST_UNKNOWN,
     check_unknown_note,
+    cut_own_why,
     cut_unknown_note,
     id_span,
     lost_gap_note,
@@ -491,8 +492,8 @@ class LostRules(NokRules):
         acts = self._drop(ev.t, State.TRACKING, StateReason(Because.UNKNOWN_HELD, bolt=en.bolt)) \
             if self.tool_on and en.vin == self.vin else []
         acts += self._hold_unanswered(ev.t, [_Cut(en, since, ev.t)], lambda u: cut_unknown_note(
-            f"tightening {tid} may be its own or {whose}'s, made during the link cut and "
-            "sent late (the controller's clock not known)", u.selection.pset, u.enabled_at),
+            cut_own_why(tid, f"or {whose}'s, made during the link cut and sent late (the "
+                             "controller's clock not known)"), u.selection.pset, u.enabled_at),
             tid)
         self._enabled, self._off_at = None, None
         return acts
@@ -520,8 +521,8 @@ class LostRules(NokRules):
             return []
         tid, pset = int(r.tightening_id), int(r.pset)
         if pset == cut.selection.pset:
-            return self._cut_unknown(ev.t, f"tightening {tid} may be its own (not proved by "
-                                           "the controller's data)", tid=tid)
+            return self._cut_unknown(ev.t, cut_own_why(tid, "(not proved by the controller's "
+                                                         "data)"), tid=tid)
         if ev.made_at is not None and not (
                 cut.enabled_at - CLOCK_SLACK_S <= ev.made_at
                 <= max(self._link_back_at, cut.cut_at) + CLOCK_SLACK_S):

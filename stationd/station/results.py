@@ -13,6 +13,7 @@ from db.kinds import (
     UNKNOWN_TYPE_HELD,
     not_taken_note,
     other_pset_note,
+    ran_again_why,
     unknown_type_note,
 )
 from drivers.wrench.base import (
@@ -328,14 +329,12 @@ class ResultRules(UnreadRules):
         what = "a loosening" if kind is ResultKind.LOOSENING and not en.loosen \
             else "a rundown"
         # (of another pset: the controller's own program selected, the tool still on; a
-        # trial: a NOK then a rundown of another pset left the bolt ending NOK, its tool on)
-        which = "of its pset" if int(r.pset) == en.pset else f"of pset {int(r.pset)}"
-        # (named as the result an outcome entered is, only of the pset sent: a reviewer, an
+        # trial: a NOK then a rundown of another pset left the bolt ending NOK, its tool on;
+        # named as the result an outcome entered is only of the pset sent: a reviewer, an
         # entered outcome carried another program's result)
-        return self._cut_unknown(ev.t, f"tightening {tid}, {what} {which} made during the "
-                                       f"link cut after its rundown {after}, may be its own "
-                                       "again or another bolt's", cut,
-                                 tid if int(r.pset) == en.pset else None)
+        own = int(r.pset) == en.pset
+        return self._cut_unknown(ev.t, ran_again_why(tid, what, None if own else int(r.pset),
+                                                     after), cut, tid if own else None)
 
     def _controller_event(self, ev: ResultIn, kind: ResultKind,
                           held: Selection | None = None) -> list[Action]:
