@@ -115,10 +115,11 @@ def wait_stored() -> None:
 
 
 def _read(path: Path) -> np.ndarray | None:
-    """The image kept at ``path``; None when it is not there yet, is being replaced or was
-    cut short (a zero-length file: EOFError)."""
+    """The image kept at ``path``, mapped read-only (the page cache's pages, shared by every
+    process that reads it: no 60 MB copy each); None when it is not there yet, is being
+    replaced or was cut short (a zero-length file: EOFError)."""
     with contextlib.suppress(OSError, ValueError, EOFError):
-        image: np.ndarray = np.load(path, allow_pickle=False)
+        image: np.ndarray = np.load(path, mmap_mode="r", allow_pickle=False)
         return image
     return None
 

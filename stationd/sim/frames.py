@@ -11,17 +11,25 @@ exactly (tested); with a new seed per frame the window's noise is fresh and the 
 frozen, which a detector cannot tell apart.
 
 Composing is a camera's buffer pool: a frame is written into a buffer that nobody holds any
-more (the background is copied into it once; afterwards only the last window is put back and
-the new one pasted), so a grab costs a window, not 60 MB of memory traffic, as a real camera
-that DMAs into queued buffers costs the host nothing per frame.  A frame still referenced by
-anyone (the vision, the screens' latest frames, a test) is never written into again.
+more (afterwards only the last window is put back and the new one pasted), so a grab costs a
+window, not 60 MB of memory traffic, as a real camera that DMAs into queued buffers costs the
+host nothing per frame.  A frame still referenced by anyone (the vision, the screens' latest
+frames, a test) is never written into again.  A buffer is not a copy of the background either:
+the background lives in a file, shown read-only (the shared render folder's own file, whose
+pages every process shares, or else a memory file of the camera's), and each buffer is a
+copy-on-write mapping of that file, so a buffer costs the pages its windows were written
+into.  A copy cost 60 MB of page faults (0.17 s of a core, most of it the kernel's): four
+buffers for each of eight cameras in every station a test or a demo starts.
 """
 
 from __future__ import annotations
 
+import mmap
+import os
 import sys
 import threading
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -64,26 +72,36 @@ class FrameSource:
         # every window rendered over it (a wrench's window beside one keeps it)
         self.fixed = list(fixed or [])
         self._background: np.ndarray | None = None
+        self._file: int | None = None    # the background's file (its descriptor)
+        self._offset = 0                  # where its pixels start in that file
         self._pool: list[_Buffer] = []
         self._pool_lock = threading.Lock()
-
-    @property
-    def has_background(self) -> bool:
-        return self._background is not None
 
     @property
     def background(self) -> np.ndarray:
         if self._background is None:
             image = backgrounds.background(
                 self.camera, replace(self.scene, markers=list(self.fixed)), self.seed)
-            image.setflags(write=False)  # handed out shared: a write would be a bug, loudly
-            self._background = image
+            # handed out shared, read-only: a write would be a bug, loudly
+            self._file, self._offset, self._background = _in_a_file(image)
         return self._background
 
-    def pool(self) -> list[np.ndarray]:
-        """The frame buffers the pool holds (the world's memory, not the daemon's)."""
+    def __del__(self) -> None:
+        """Let go of the background's file (its pages go once no frame maps them)."""
+        fd = getattr(self, "_file", None)   # None too when __init__ refused the scene
+        if fd is not None:
+            os.close(fd)
+            self._file = None
+
+    def resident_bytes(self) -> int:
+        """The memory the process's page tables count for this camera: the background's and
+        each pool buffer's pages that were read or written (``VmRSS`` counts a page once per
+        mapping that touched it, though the background's are one copy)."""
         with self._pool_lock:
-            return [b.image for b in self._pool]
+            images = [b.image for b in self._pool]
+        if self._background is not None:
+            images.append(self._background)
+        return resident(images)
 
     def frame(self, pose: MarkerPose | None, spec: MarkerSpec | None = None,
               seed: int | None = None) -> np.ndarray:
@@ -137,11 +155,22 @@ class FrameSource:
         for buf in self._pool:
             if sys.getrefcount(buf.image) <= buf.free_refs:
                 return buf
-        buf = _Buffer(self.background.copy())
+        buf = _Buffer(self._private_copy())
         buf.free_refs = sys.getrefcount(buf.image)  # the count that means "unheld", here
         if len(self._pool) < POOL:
             self._pool.append(buf)
         return buf
+
+    def _private_copy(self) -> np.ndarray:
+        """A writable frame that reads as the background: a copy-on-write mapping of its
+        file (the kernel copies a page when a window is first written into it)."""
+        bg = self.background
+        if self._file is None:
+            raise RuntimeError("a frame source without its background's file")
+        view = mmap.mmap(self._file, self._offset + bg.nbytes, flags=mmap.MAP_PRIVATE,
+                         prot=mmap.PROT_READ | mmap.PROT_WRITE)
+        return np.frombuffer(view, dtype=bg.dtype, count=bg.size,
+                             offset=self._offset).reshape(bg.shape)
 
     def _in_view(self, pose: MarkerPose, spec: MarkerSpec) -> bool:
         """Whether any of the marker's field can reach the image (with a blur margin)."""
@@ -154,3 +183,57 @@ class FrameSource:
         w, h = self.camera.size
         return bool(uv[:, 0].max() >= -8 and uv[:, 1].max() >= -8 and uv[:, 0].min() <= w + 8
                     and uv[:, 1].min() <= h + 8)
+
+
+def _in_a_file(image: np.ndarray) -> tuple[int, int, np.ndarray]:
+    """A file that holds ``image``, where in it the pixels start, and a read-only view of them
+    (the frames' buffers map the same file copy-on-write): the file ``image`` is mapped from
+    (the shared render folder's), else a memory file it is copied into."""
+    if isinstance(image, np.memmap) and image.filename and image.flags.c_contiguous:
+        fd = os.open(image.filename, os.O_RDONLY | os.O_CLOEXEC)
+        return fd, int(image.offset), np.asarray(image)
+    fd, view = _in_memory_file(np.ascontiguousarray(image))
+    return fd, 0, view
+
+
+def _in_memory_file(image: np.ndarray) -> tuple[int, np.ndarray]:
+    """``image`` copied into a memory file: its descriptor and a read-only view of it."""
+    fd = os.memfd_create("stationd-sim-background", os.MFD_CLOEXEC)
+    try:
+        os.ftruncate(fd, image.nbytes)
+        with mmap.mmap(fd, image.nbytes) as out:
+            np.frombuffer(out, dtype=image.dtype)[:] = image.reshape(-1)
+        shown = mmap.mmap(fd, image.nbytes, flags=mmap.MAP_SHARED, prot=mmap.PROT_READ)
+    except BaseException:
+        os.close(fd)
+        raise
+    view = np.frombuffer(shown, dtype=image.dtype).reshape(image.shape)
+    return fd, view
+
+
+def resident(images: list[np.ndarray]) -> int:
+    """The resident size (``Rss`` of ``/proc/self/smaps``) of the mappings that hold
+    ``images``, each mapping once; an image in no mapping of its own (the heap's) counts its
+    size.  Read once at a benchmark's end: the file lists every mapping of the process."""
+    try:
+        text = Path("/proc/self/smaps").read_text()
+    except OSError:
+        return sum(im.nbytes for im in images)
+    spans: list[tuple[int, int, int]] = []     # start, end, Rss bytes
+    start = end = 0
+    for line in text.splitlines():
+        head = line.split(" ", 1)[0]
+        if "-" in head and not head.endswith(":"):
+            lo, hi = head.split("-")
+            start, end = int(lo, 16), int(hi, 16)
+        elif head == "Rss:":
+            spans.append((start, end, int(line.split()[1]) * 1024))
+    seen: dict[int, int] = {}
+    for im in images:
+        at = im.__array_interface__["data"][0]
+        span = next(((lo, rss) for lo, hi, rss in spans if lo <= at < hi), None)
+        if span is None or span[1] > im.nbytes + 2 * mmap.PAGESIZE:
+            seen[id(im)] = im.nbytes    # in a larger mapping (the heap): its own size
+        else:
+            seen[span[0]] = span[1]
+    return sum(seen.values())

@@ -171,11 +171,8 @@ class World:
         """The world's own image memory (backgrounds, frames rendered ahead): a benchmark
         subtracts it from the process's to tell the daemon's share."""
         seen: dict[int, int] = {}
-        for src in self._sources.values():
-            if src.has_background:
-                seen[id(src.background)] = src.background.nbytes
-            for buf in src.pool():
-                seen[id(buf)] = buf.nbytes
+        for src in self._sources.values():   # its background and its frames' buffers
+            seen[id(src)] = src.resident_bytes()
         live = [[patch] for _, patch in self._live.values()]
         for patches in [p for _, p in self._ahead.values()] + live:
             for pt in patches:

@@ -1,6 +1,9 @@
+from pathlib import Path
+
 import numpy as np
 
 from stationd.geometry.camera import Camera
+from stationd.sim import backgrounds
 from stationd.sim.frames import FrameSource
 from stationd.sim.render import MarkerPose, Scene, render
 from stationd.vision.marker import MarkerSpec
@@ -87,3 +90,56 @@ def test_a_released_buffer_is_reused_with_the_old_window_put_back():
     second = src.compose(b)
     assert id(second) == first_id           # the same buffer, not a new 60 MB copy
     assert np.array_equal(second, _expected(src, b))   # and nothing of a is left
+
+
+def _mapping(image: np.ndarray) -> dict[str, int]:
+    """The smaps fields (bytes) of the mapping that holds ``image``."""
+    at = image.__array_interface__["data"][0]
+    fields: dict[str, int] = {}
+    inside = False
+    for line in Path("/proc/self/smaps").read_text().splitlines():
+        head = line.split(" ", 1)[0]
+        if "-" in head and not head.endswith(":"):
+            lo, hi = (int(v, 16) for v in head.split("-"))
+            if inside:
+                break
+            inside = lo <= at < hi
+        elif inside and line.endswith(" kB"):
+            fields[head.rstrip(":")] = int(line.split()[1]) * 1024
+    return fields
+
+
+def test_a_buffer_costs_the_pages_its_windows_were_written_into() -> None:
+    """The pool's buffers share the background's pages: one holds only what its windows
+    changed (copied by the kernel on the first write: the mapping's anonymous pages), and the
+    background stays read-only; what the page tables count for the camera is told."""
+    src = FrameSource(CAM, SCENE, seed=7)
+    a, b = _two_patches(src)
+    frames = [src.compose(a), src.compose(b)]       # two held: two buffers
+    assert not src.background.flags.writeable
+    for frame, ((_, _, w, h), _px) in zip(frames, (a, b), strict=True):
+        copied = _mapping(frame)["Anonymous"]
+        assert w * h * 3 <= copied <= h * (-(-w * 3 // 4096) + 1) * 4096
+        assert copied < frame.nbytes / 2
+    for frame, patch in zip(frames, (a, b), strict=True):   # read whole: mapped whole
+        assert np.array_equal(frame, _expected(src, patch))
+    assert 3 * src.background.nbytes <= src.resident_bytes() <= 3 * (frames[0].nbytes + 8192)
+
+
+def test_frames_over_the_shared_render_folder_map_its_file(tmp_path, monkeypatch) -> None:
+    """With the render folder, the background is its file's pages (read-only, shared by the
+    processes that read it) and a frame a copy-on-write mapping of them: the file is never
+    written, and the frames are what they are without the folder."""
+    monkeypatch.setenv(backgrounds.ENV, str(tmp_path))
+    assert FrameSource(CAM, SCENE, seed=8).background.size     # rendered and stored
+    backgrounds.wait_stored()
+    stored = {p: p.read_bytes() for p in tmp_path.glob("*.npy")}
+    src = FrameSource(CAM, SCENE, seed=8)
+    assert isinstance(src.background.base, np.memmap)   # read back, mapped
+    a, b = _two_patches(src)
+    held = [src.compose(a), src.compose(b), src.compose(a)]
+    monkeypatch.delenv(backgrounds.ENV)
+    plain = FrameSource(CAM, SCENE, seed=8)
+    for frame, patch in zip(held, (a, b, a), strict=True):
+        assert np.array_equal(frame, _expected(plain, patch))
+    assert {p: p.read_bytes() for p in stored} == stored
