@@ -464,6 +464,21 @@ class OpcUaAcknowledged(Base):
     at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
 
 
+class CameraPin(Base):
+    """The camera (its serial number) a pair's side was first used with under one
+    calibration (``calibration``: the digest of the pair's calibration): a camera with
+    another serial under the same calibration is a unit replaced without calibrating the
+    pair again, refused (``db.cameras``)."""
+
+    __tablename__ = "camera_pins"
+
+    pair: Mapped[str] = mapped_column(String(64), primary_key=True)
+    side: Mapped[str] = mapped_column(String(8), primary_key=True)
+    calibration: Mapped[str] = mapped_column(String(64), primary_key=True)
+    serial: Mapped[str] = mapped_column(String(128))
+    pinned_at: Mapped[datetime] = mapped_column(UtcDateTime, default=utcnow)
+
+
 class CalibrationCheck(Base):
     """A camera pair checked against the reference markers: when, its verdict (ok, moved, not
     checked), the worst reference and its offset against the tolerance, why it was not

@@ -288,6 +288,10 @@ class _Link:
                 f"{self.settings.trigger}, {self.pixel_format} {region.width}x{region.height}, "
                 f"pool {self.settings.buffers} x {self.payload / 1e6:.2f} MB")
 
+    def serial_number(self) -> str | None:
+        serial = self.cam.get_device_serial_number()
+        return None if serial is None else (str(serial).strip() or None)
+
     def set_exposure(self, us: float) -> float:
         cam, call = self.cam, self._call
         if not call("check exposure", cam.is_exposure_time_available):
@@ -459,6 +463,18 @@ class AravisCamera(CameraDevice):
                 return link.identity()
             except Exception as exc:  # a description must not fail
                 return f"Aravis camera {self.settings.name} ({exc})"
+
+    def serial_number(self) -> str | None:
+        """The serial number the camera reports (GenICam DeviceSerialNumber); None while its
+        link is down or where it reports none."""
+        link = self._link
+        if link is None:
+            return None
+        with self._io:
+            try:
+                return link.serial_number()
+            except Exception:   # a read that failed: not said
+                return None
 
     def _open(self) -> None:
         link = self._connect(False)

@@ -192,6 +192,13 @@ class CameraDevice(Device):
         t, self._triggered_at = self._triggered_at, None
         return t if t is not None else time.time()
 
+    def serial_number(self) -> str | None:
+        """The camera's serial number as it reports it; None where the backend cannot tell
+        one unit from another.  The station pins a pair's calibration to the serials it was
+        first used with, so that a camera replaced without calibrating the pair again is
+        refused rather than trusted (``stationd.shell.pins``)."""
+        return None
+
     # -- hooks --------------------------------------------------------------------------
     @abstractmethod
     def identity(self) -> str:

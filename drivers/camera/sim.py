@@ -17,7 +17,11 @@ simulated world has started.  A grab with no world for the pair is a ConnectErro
 what to register.  ``seed`` is the URL's ``seed`` option plus the frame number, the same for
 the left and right frames of one stereo grab, so a seeded world renders a reproducible run.
 
+Its serial number is ``SIM-PAIR-SIDE`` unless the URL's ``serial`` option names another (a
+test's camera replaced by another unit).
+
     sim://pair1/left?seed=100
+    sim://pair1/left?serial=SIM-SPARE-1
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ from drivers.url import parse_url
 #: ``source(side, seed, at) -> HxWx3 uint8 BGR image`` of the world as of host time ``at``
 WorldSource = Callable[[str, int, float], np.ndarray]
 SIDES = ("left", "right")
-FORM = "sim://PAIR/left|right[?seed=N]"
+FORM = "sim://PAIR/left|right[?seed=N&serial=TEXT]"
 
 _worlds: dict[str, WorldSource] = {}
 _lock = threading.Lock()
@@ -68,8 +72,14 @@ def registered_worlds() -> list[str]:
 
 def parse_sim_url(text: str) -> tuple[str, str, int]:
     """(pair, side, seed) of a ``sim://`` URL; the pair keeps its case (hostnames do not)."""
+    pair, side, seed, _ = _parse(text)
+    return pair, side, seed
+
+
+def _parse(text: str) -> tuple[str, str, int, str]:
+    """(pair, side, seed, serial number) of a ``sim://`` URL."""
     url = parse_url(text)
-    opts = url.typed_options({"seed": (int, 0)}, FORM)
+    opts = url.typed_options({"seed": (int, 0), "serial": (str, "")}, FORM)
     parts = urlsplit(text)
     pair = unquote(parts.netloc)
     side = unquote(parts.path).strip("/")
@@ -77,7 +87,7 @@ def parse_sim_url(text: str) -> tuple[str, str, int]:
         raise url.error(f"expected {FORM}")
     if opts["seed"] < 0:
         raise url.error("option seed must be >= 0")
-    return pair, side, int(opts["seed"])
+    return pair, side, int(opts["seed"]), opts["serial"].strip() or f"SIM-{pair}-{side}"
 
 
 class SimCamera(CameraDevice):
@@ -90,7 +100,7 @@ class SimCamera(CameraDevice):
 
     def __init__(self, url: str, *, timeout: float | None = None) -> None:
         super().__init__(url, timeout=timeout)
-        self.pair, self.side, self.seed = parse_sim_url(url)
+        self.pair, self.side, self.seed, self._serial = _parse(url)
         self._count = 0
 
     @classmethod
@@ -102,7 +112,10 @@ class SimCamera(CameraDevice):
     def identity(self) -> str:
         with _lock:
             world = "world registered" if self.pair in _worlds else "no world registered yet"
-        return f"simulated camera {self.pair}/{self.side} ({world})"
+        return f"simulated camera {self.pair}/{self.side} S/N {self._serial} ({world})"
+
+    def serial_number(self) -> str | None:
+        return self._serial
 
     def _open(self) -> None:
         self._count = 0

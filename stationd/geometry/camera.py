@@ -13,6 +13,7 @@ so that the renderer and the detector agree to far below the accuracy being meas
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -221,6 +222,18 @@ class StereoPair:
     def to_dict(self) -> dict[str, Any]:
         return {"left": self.left.to_dict(), "right": self.right.to_dict(),
                 "R": self.R.tolist(), "T": self.T.tolist()}
+
+    def digest(self) -> str:
+        """What this calibration is, in 32 hex digits (SHA-256 of its values as stored): the
+        station pins the cameras a calibration was first used with to it (``db.cameras``);
+        a pair calibrated again has another digest, and pins its cameras anew."""
+        h = hashlib.sha256()
+        for cam in (self.left, self.right):
+            for arr in (cam.K, cam.dist, np.asarray(cam.size, dtype=np.float64)):
+                h.update(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
+        for arr in (self.R, self.T):
+            h.update(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
+        return h.hexdigest()[:32]
 
     @property
     def baseline_mm(self) -> float:

@@ -115,7 +115,7 @@ class Station:
                                 operator_idle_s=self.cfg.access.operator_idle_s)
         self._pool = ThreadPoolExecutor(max_workers=4, thread_name_prefix="station")
         call = Blocking(self._pool)
-        self.devices = Devices(self.cfg, self.device_kw)
+        self.devices = Devices(self.cfg, self.device_kw, pins=self.records.pin_cameras)
         # the cameras' own threads, one per pair: their grabs (a 20 MP frame, a simulated
         # world's first renders: seconds) took every thread of the pool above, and the lift's
         # poll, the controller's and the database's calls and a stop waited behind them

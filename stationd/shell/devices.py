@@ -11,9 +11,12 @@ its calibration describes.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from pathlib import Path
 from typing import Any
 
+from db.cameras import Replaced
+from db.errors import DbError
 from drivers.camera import CameraDevice
 from drivers.camera.pair import StereoGrabber
 from drivers.devices import Kind, open_device
@@ -42,14 +45,22 @@ class Pair:
             quiet(cam.close)
 
 
+#: ``pins(pair, calibration digest, {side: serial number})``: the sides whose camera is not
+#: the one the calibration was first used with (``Records.pin_cameras``)
+Pins = Callable[[str, str, Mapping[str, str | None]], list[Replaced]]
+
+
 class Devices:
     """Opens the station's devices from ``cfg``; ``options`` per kind go to the backends
-    (tests and the demo: a simulated controller's psets, a timeout)."""
+    (tests and the demo: a simulated controller's psets, a timeout).  With ``pins``, a pair
+    is up only with the cameras its calibration was first used with."""
 
     def __init__(self, cfg: StationConfig,
-                 options: dict[str, dict[str, Any]] | None = None) -> None:
+                 options: dict[str, dict[str, Any]] | None = None,
+                 pins: Pins | None = None) -> None:
         self.cfg = cfg
         self.options = options or {}
+        self.pins = pins
 
     def pair_names(self) -> list[str]:
         """The pairs wired to two cameras."""
@@ -93,6 +104,12 @@ class Devices:
                 quiet(cam.close)
             raise _both(failed)
         journal_cameras(name, pc.left, pc.right, cams)
+        try:
+            self._check_pins(name, cams)
+        except BaseException:
+            for cam in cams:
+                quiet(cam.close)
+            raise
         # unnamed: the station says the pair's name before its reason
         return Pair(cams, StereoGrabber(cams[0], cams[1], pc.max_skew_s, name=""))
 
@@ -107,6 +124,42 @@ class Devices:
         if problem is not None:
             raise ProtocolError(problem)
         journal_cameras(name, pc.left or "left", pc.right or "right", pair.cams)
+        self._check_pins(name, pair.cams)
+
+    def _check_pins(self, name: str, cams: list[CameraDevice]) -> None:
+        """The pair's cameras are the ones its calibration was first used with (pinned now
+        if it never was): a ProtocolError naming the replaced camera otherwise, or when they
+        cannot be checked (the database down: the pair waits for it, never trusted blind)."""
+        if self.pins is None:
+            return
+        pc = self.cfg.pairs[name]
+        serials = {"left": serial_of(cams[0]), "right": serial_of(cams[1])}
+        try:
+            replaced = self.pins(name, pc.calibration.digest(), serials)
+        except DbError as exc:
+            raise ProtocolError(f"its cameras not checked against its calibration "
+                                f"({one_line(exc)}); retried") from None
+        if replaced:
+            names = {"left": pc.left or "left", "right": pc.right or "right"}
+            raise ProtocolError("; ".join(replaced_words(names[r.side], r, pc.calibration_path)
+                                          for r in replaced))
+
+
+def serial_of(cam: CameraDevice) -> str | None:
+    """The camera's serial number; None where it says none or the read fails."""
+    try:
+        return cam.serial_number()
+    except Exception:   # a camera that cannot say is a camera not pinned, never a crash
+        return None
+
+
+def replaced_words(camera: str, r: Replaced, calibration: Path) -> str:
+    """Why a pair is refused: which camera, its serial against the calibration's."""
+    return (f"camera {camera} is S/N {r.seen}, but the pair's calibration ({calibration.name}) "
+            f"was made with S/N {r.pinned} (first used {r.pinned_at:%Y-%m-%d %H:%M} UTC): a "
+            f"camera replaced or swapped needs the pair calibrated again (stationd calibrate "
+            f"stereo, then its new calibration file and a reload); nothing is localized in "
+            f"this pair until then")
 
 
 def journal_cameras(pair: str, left: str, right: str, cams: list[CameraDevice]) -> None:

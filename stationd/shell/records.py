@@ -17,7 +17,7 @@ import re
 import shutil
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from enum import StrEnum
@@ -26,6 +26,7 @@ from typing import Any, TypeVar
 
 import cv2
 
+from db.cameras import Replaced, pin_cameras
 from db.checks import record_check
 from db.counting import counted
 from db.curves import link_curves, store_curve
@@ -202,6 +203,15 @@ class Records:
                 self._removed_open(here, r.removed)
                 self._changed_open(here, r.changed, r.added)
         return self.repo
+
+    def pin_cameras(self, pair: str, calibration: str,
+                    serials: Mapping[str, str | None]) -> list[Replaced]:
+        """Each side's camera against the one ``pair``'s calibration was first used with
+        (pinned now where none is): the sides whose camera was replaced (``db.cameras``).
+        ``DatabaseError`` while the database is not open or fails: not checked."""
+        if self.repo is None:
+            raise DatabaseError("the database is not open")
+        return pin_cameras(self.repo, pair, calibration, serials)
 
     def _changed_open(self, report: VehicleReport, changed: Sequence[str],
                       added: Sequence[str]) -> None:

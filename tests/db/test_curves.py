@@ -29,7 +29,7 @@ def test_the_migration_creates_the_curves_table_the_model_describes(tmp_path):
     upgrade(engine)
     assert "curves" in inspect(engine).get_table_names()
     with engine.connect() as conn:
-        assert current_revision(conn) == head_revision() == "0022"
+        assert current_revision(conn) == head_revision() == "0023"
         ctx = MigrationContext.configure(conn, opts={"compare_type": True})
         assert list(compare_metadata(ctx, Base.metadata)) == []
     engine.dispose()

@@ -19,7 +19,8 @@ from tests.db.conftest import url_of
 TABLES = {"vehicle_models", "psets", "bolts", "process_parameters", "vehicles",
           "tightening_records", "tool_enables", "unattributed_results", "commands", "feed", "meta",
           "forward_quarantine", "result_gaps", "curves", "opcua_acknowledged",
-          "calibration_checks", "controller_events", "unreadable_results", "vehicle_closings",
+          "calibration_checks", "camera_pins", "controller_events", "unreadable_results",
+          "vehicle_closings",
           "alembic_version"}
 
 
@@ -35,7 +36,7 @@ def test_migrated_schema_matches_the_models(tmp_path):
     assert set(inspect(engine).get_table_names()) == TABLES
     assert _diff(engine, Base.metadata) == []
     with engine.connect() as conn:
-        assert current_revision(conn) == head_revision() == "0022"
+        assert current_revision(conn) == head_revision() == "0023"
     engine.dispose()
 
 
@@ -197,7 +198,7 @@ def test_an_upgrade_says_the_schema_it_moved_and_a_newer_database_is_named_so(tm
         Repository.open(url).close()
         Repository.open(url).close()
     said = [r for r in caplog.records if "migrated" in r.getMessage()]
-    assert len(said) == 1 and "schema 0017 migrated to 0022" in said[0].getMessage()
+    assert len(said) == 1 and "schema 0017 migrated to 0023" in said[0].getMessage()
     assert said[0].levelno == logging.WARNING
     engine = make_engine(url)
     with engine.begin() as conn:
@@ -205,5 +206,5 @@ def test_an_upgrade_says_the_schema_it_moved_and_a_newer_database_is_named_so(tm
     engine.dispose()
     with pytest.raises(DatabaseError) as err:
         Repository.open(url, read_only=True)
-    assert "schema 0099, this stationd reads 0022: a newer stationd's database" in str(err.value)
+    assert "schema 0099, this stationd reads 0023: a newer stationd's database" in str(err.value)
     assert "migrates it" not in str(err.value)

@@ -67,3 +67,27 @@ def test_a_pair_whose_right_camera_is_on_the_left_is_said_swapped():
                                                 "the left camera (T's x is +100.0 mm")
     assert said.endswith("left and right swapped?")
     assert StereoPair(cam, cam, np.eye(3), np.array([20.0, -100.0, 0.0])).swapped() is None
+
+
+def test_a_calibrations_digest_is_its_values(tmp_path):
+    """The same file read twice is one calibration; any value changed (a pair calibrated
+    again) is another, to which the station pins the cameras anew."""
+    from pathlib import Path
+
+    import yaml
+
+    src = Path(__file__).resolve().parents[2] / "config" / "sim" / "pair1.yaml"
+    a, b = StereoPair.load(src), StereoPair.load(src)
+    assert a.digest() == b.digest() and len(a.digest()) == 32
+    data = yaml.safe_load(src.read_text())
+    for path in (("left", "K", 0, 0), ("right", "dist", 1), ("T", 0), ("left", "size", 0)):
+        changed = yaml.safe_load(src.read_text())
+        node = changed
+        for key in path[:-1]:
+            node = node[key]
+        node[path[-1]] = node[path[-1]] + 1
+        out = tmp_path / "pair.yaml"
+        out.write_text(yaml.safe_dump(changed))
+        assert StereoPair.load(out).digest() != a.digest(), path
+    out.write_text(yaml.safe_dump(data))
+    assert StereoPair.load(out).digest() == a.digest()

@@ -227,3 +227,42 @@ def test_a_database_failing_at_a_vehicle_is_a_fault_its_keeper_probes_back(tmp_p
         assert health == [(False, "down"), (True, "")], health
 
     scenario(tmp_path, body, vin="DBFAULTVIN0000001", prepare=prepare, loaded=False)
+
+
+@pytest.mark.timeout(240)
+def test_a_camera_not_the_one_its_calibration_was_made_with_is_a_fault(tmp_path):
+    """The pair's calibration was first used with another unit of pair1's left camera (its
+    serial number pinned in the database): the pair is refused, the station in fault naming
+    both serials, nothing sent; the right unit back (its pin matching again: here rewritten,
+    as a camera cannot be swapped under a test), the pair comes back by its keeper's retry."""
+    from db.engine import write_session
+    from db.models import CameraPin
+
+    digest = load_station_config(SIM_CONFIG).pairs["pair1"].calibration.digest()
+
+    def pin(st, serial):
+        with write_session(st.repo.engine) as s:
+            s.get(CameraPin, ("pair1", "left", digest)).serial = serial
+
+    from db.cameras import pin_cameras
+
+    # pinned before the station opens its cameras (the database of an earlier start)
+    repo = Repository.open(f"sqlite:///{tmp_path}/s.db")
+    assert pin_cameras(repo, "pair1", digest, {"left": "HIK-DA0001"}) == []
+    repo.engine.dispose()
+
+    async def body(st, world):
+        await until_async(lambda: st.core.state is State.FAULT, 60)
+        assert state_words(st.core.reason).startswith(
+            "pair1: camera pair1_left is S/N SIM-pair1-left, but the pair's calibration "
+            "(pair1.yaml) was made with S/N HIK-DA0001"), state_words(st.core.reason)
+        await asyncio.sleep(1.0)
+        assert st.core.state is State.FAULT and not _sends(st) and st.vin is None
+        pin(st, "SIM-pair1-left")
+        await until_async(lambda: _back(st, "pair1"), 90, "pair1 back")
+        await until_async(lambda: st.vin is not None, 30, "the vehicle loaded")
+        world.set_wrench(wrench_at(np.array(vehicle_bolts(st)["B01"].position),
+                                   np.random.default_rng(3), st.cfg.tool.length_mm))
+        await until_async(lambda: _sends(st) == ["B01"], 60, "B01 sent once pair1 is back")
+
+    scenario(tmp_path, body, loaded=False)
