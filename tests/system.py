@@ -53,7 +53,7 @@ MODULES: tuple[str, ...] = (
     # whole daemons: in the test process (tests/shell/daemons.py) or as systemd runs them
     "shell/test_calibration_daemon.py", "shell/test_commands_daemon.py",
     "shell/test_curves_daemon.py", "shell/test_daemon_faults.py", "shell/test_faults.py",
-    "station/test_gaps.py", "shell/test_idle.py", "shell/test_nok_daemon.py",
+    "shell/test_gaps_daemon.py", "shell/test_idle.py", "shell/test_nok_daemon.py",
     "shell/test_operator_daemon.py", "shell/test_records.py",
     "shell/test_reload_results.py", "shell/test_restart.py",
     "shell/test_result_types_daemon.py", "shell/test_station_sim.py",

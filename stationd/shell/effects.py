@@ -15,7 +15,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any, TypeVar, assert_never
 
 from db.bolts import Parameters
 from db.repository import Repository
@@ -149,9 +149,6 @@ class Effects:
 
     async def do(self, a: Action) -> Event | None:
         """Carry out one action; what came of it, for the core (or None)."""
-        if isinstance(a, Publish):
-            self.publish(a.event)
-            return None
         try:
             return await self._do(a)
         except DeviceError as exc:   # the link is reset: its keeper reconnects and reports
@@ -160,6 +157,11 @@ class Effects:
             return DeviceFault(time.time(), WRENCH, fault_kind(exc), one_line(exc))
 
     async def _do(self, a: Action) -> Event | None:
+        """Every kind of action has its branch, checked by the type checker (a kind added to
+        ``Action`` without one fails ``mypy`` at ``assert_never``)."""
+        if isinstance(a, Publish):
+            self.publish(a.event)
+            return None
         wrench = self._wrench.device
         if isinstance(a, SendParams | SendVin | EnableTool) and wrench is None:
             return DeviceFault(time.time(), WRENCH, FaultKind.DOWN, "not connected")
@@ -251,6 +253,8 @@ class Effects:
                 self._database.lost(DeviceError(one_line(exc)))
                 self.log.error("calibration check of %s not recorded: %s", a.check.pair,
                                one_line(exc))
+        else:
+            assert_never(a)
         return None
 
     def publish(self, ev: StationEvent) -> None:

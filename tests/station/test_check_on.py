@@ -140,7 +140,7 @@ def test_a_gap_the_tool_on_check_tells_before_the_enable_s_fetched_rundown_holds
         gap_first):
     """B1's tool on; the controller made 41 and 42, both pushes lost, and no longer has 41.
     Revealed by the push of 43 (the operator pulled again), 41 is a gap and 42, fetched,
-    B1's: recorded to B1, and B1 not held (tests/station/test_gaps.py).  Found instead by
+    B1's: recorded to B1, and B1 not held (tests/shell/test_gaps_daemon.py).  Found instead by
     the periodic check with the tool on (it ran between two pulls: a loaded machine), the
     gap held B1 and 42, made under B1's enable alone, was stored as no bolt's -- the same
     facts decided two ways.  Decided at the check's end now: 42 recorded to B1 and nothing
