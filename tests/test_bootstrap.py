@@ -34,13 +34,14 @@ def _stub(bin_dir: Path, name: str, body: str) -> None:
     path.chmod(0o755)
 
 
-def _run(tree: Path, env: dict[str, str]) -> list[str]:
-    r = subprocess.run(["bash", str(tree / ".ci" / "bootstrap")], capture_output=True,
+def _run(tree: Path, env: dict[str, str], *args: str) -> list[str]:
+    r = subprocess.run(["bash", str(tree / ".ci" / "bootstrap"), *args], capture_output=True,
                        text=True, env=env, timeout=60, check=True)
     return r.stdout.splitlines()
 
 
-def test_bootstrap_prints_a_line_per_step_and_is_idempotent(tmp_path):
+def _machine(tmp_path: Path) -> tuple[Path, Path, dict[str, str]]:
+    """A copy of the script, the stand-ins on PATH (as root) and their environment."""
     tree, bin_dir = tmp_path / "tree", tmp_path / "bin"
     (tree / ".ci").mkdir(parents=True)
     bin_dir.mkdir()
@@ -55,6 +56,12 @@ def test_bootstrap_prints_a_line_per_step_and_is_idempotent(tmp_path):
     env = {"PATH": f"{bin_dir}:/usr/bin:/bin", "LOG": str(log),
            "STATE": str(tmp_path / "installed"), "HOME": str(tmp_path),
            "SYSTEM_PYTHON": str(bin_dir / "python3")}   # as root: the system's Python
+    return tree, log, env
+
+
+def test_bootstrap_prints_a_line_per_step_and_is_idempotent(tmp_path):
+    tree, log, env = _machine(tmp_path)
+    bin_dir = tmp_path / "bin"
     first = _run(tree, env)
     steps = [line.split("] ", 1)[1] for line in first]
     assert all(line.startswith("bootstrap: [") for line in first)
@@ -74,3 +81,22 @@ def test_bootstrap_prints_a_line_per_step_and_is_idempotent(tmp_path):
     assert calls.count("apt-get install") == 1 and calls.count("-m venv .venv") == 1
     assert calls.count("npm install") == 1      # node-opcua is there: not again
     assert os.access(tree / ".venv" / "bin" / "python", os.X_OK)
+
+
+def test_a_station_pc_gets_the_station_alone(tmp_path):
+    """``--station``: the daemon, its commands and sqlite3 for the backups; no browsers, no
+    PostgreSQL server, no Node.js, no dev tools (a technician's trial: the tests' set was
+    installed on a station PC, a database server started by it)."""
+    tree, log, env = _machine(tmp_path)
+    steps = [line.split("] ", 1)[1] for line in _run(tree, env, "--station")]
+    [install] = [s for s in steps if s.startswith("apt-get install ")]
+    packages = install.split()[2:]
+    assert "sqlite3" in packages and "gir1.2-aravis-0.8" in packages
+    assert not {"chromium", "firefox-esr", "postgresql", "nodejs", "npm"} & set(packages)
+    assert "pip install -e . (numpy, OpenCV, ...: a few minutes the first time)" in steps
+    assert steps[-1].startswith("ready (.venv, for a station")
+    assert "npm" not in log.read_text()
+    r = subprocess.run(["bash", str(tree / ".ci" / "bootstrap"), "--stations"],
+                       capture_output=True, text=True, env=env, timeout=60)
+    assert r.returncode == 2 and r.stderr.strip() == (
+        "bootstrap: unknown option --stations (usage: bootstrap [--station])")
