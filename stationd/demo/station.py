@@ -95,7 +95,7 @@ from stationd.station.events import (
     VehicleClosed,
     WrongBolt,
 )
-from stationd.station.policy import NokPolicy, NokRule
+from stationd.station.policy import NokPolicy, NokRule, Strategy
 from stationd.web.config import DEFAULT_LISTEN, HttpConfig, open_bind_problem, split_listen
 
 SIM_CONFIG = Path(__file__).resolve().parents[2] / "config" / "sim" / "station.yaml"
@@ -119,7 +119,7 @@ def demo_policy(cfg: StationConfig, psets: dict[int, SimPset]) -> NokPolicy | No
     first, with a loosen pset no bolt uses; None: the file's own policy runs."""
     if cfg.nok != NokPolicy() or not psets or max(psets) >= 999:
         return None
-    rule = NokRule(max_nok=3, strategy="loosen", loosen_pset=max(psets) + 1)
+    rule = NokRule(max_nok=3, strategy=Strategy.LOOSEN, loosen_pset=max(psets) + 1)
     return NokPolicy(NokRule(max_nok=3), {n: rule for n in sorted(psets)[1:]})
 
 
@@ -128,7 +128,7 @@ def policy_words(policy: NokPolicy) -> str:
     d = policy.default
     parts = [f"max_nok {d.max_nok}, {d.strategy}"]
     parts += [f"pset {n}: {r.strategy}" + (f" with loosen pset {r.loosen_pset}"
-                                           if r.strategy == "loosen" else "")
+                                           if r.strategy is Strategy.LOOSEN else "")
               for n, r in policy.psets.items()]
     parts += [f"bolt {b}: {r.strategy}" for b, r in policy.bolts.items()]
     return "; ".join(parts)

@@ -47,6 +47,7 @@ from stationd.station.inputs import (
     Written,
 )
 from stationd.station.matching import BoltMatcher, BoltRule
+from stationd.station.policy import Strategy
 from stationd.station.state import (
     LIFT_FAULT_BIT,
     NO_LOOSEN_PSET,
@@ -161,7 +162,7 @@ class LiftRules(FaultRules):
             elif n >= rule.max_nok:  # locked now by a lowered max_nok: recorded as such
                 self.matcher.locked[k] = n
                 newly.append(NoteLock(ev.vin, k, n, ev.t))
-            elif rule.strategy == "skip":
+            elif rule.strategy is Strategy.SKIP:
                 self.matcher.skipped.setdefault(k, NOK_SKIPPED)
         self._loosen_back(ev)
         self._holds_back(ev)
@@ -225,7 +226,7 @@ class LiftRules(FaultRules):
             # strategy, or a loosening that did not come loose under any strategy (a loosen
             # command's: live, its loosen pset goes again; after a reload its tightening pset
             # went onto a joint still tight)
-            if status == TO_LOOSEN or (status == NOK and (rule.strategy == "loosen"
+            if status == TO_LOOSEN or (status == NOK and (rule.strategy is Strategy.LOOSEN
                                                           or k in ev.loosen_nok)):
                 if rule.loosen_pset is None:
                     self.matcher.skipped.setdefault(k, NO_LOOSEN_PSET)

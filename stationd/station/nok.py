@@ -24,6 +24,7 @@ from stationd.station.inputs import (
     CommandDone,
 )
 from stationd.station.orders import OrderRules
+from stationd.station.policy import Strategy
 from stationd.station.state import NOK_SKIPPED
 
 
@@ -70,7 +71,7 @@ class NokRules(OrderRules):
         if bolt in self.matcher.locked:
             return [self._nok_after_lock(t, bolt, n, tid)]
         rule = self._nok_rule(bolt, pset)
-        if rule.strategy == "loosen" and rule.loosen_pset is not None:
+        if rule.strategy is Strategy.LOOSEN and rule.loosen_pset is not None:
             self._loosen.add(bolt)
         if rule.count_in_batch:     # the sequence goes on without an OK of this bolt
             self.matcher.counted.add(bolt)
@@ -80,7 +81,7 @@ class NokRules(OrderRules):
             return self._lock(t, bolt, n)
         if bolt in self._loosen:
             return [self._to_loosen(t, bolt)]
-        if rule.strategy == "skip":
+        if rule.strategy is Strategy.SKIP:
             why = NOK_SKIPPED
             self.matcher.skipped[bolt] = why
             return [Publish(BoltSkipped(bolt, skip=why, t=t))]

@@ -33,12 +33,24 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from enum import StrEnum
 
 from db.bolts import BoltTable
 from stationd.errors import ConfigError
 from stationd.yamlio import YamlNode
 
-STRATEGIES = ("repeat", "skip", "loosen")
+
+class Strategy(StrEnum):
+    """What follows a bolt's NOK: tightened again, skipped (the vehicle goes on without it),
+    or loosened with its loosen pset first.  A ``StrEnum``: the station file's word is its
+    value, and the status, the journal and the demo's summary print it as before."""
+
+    REPEAT = "repeat"
+    SKIP = "skip"
+    LOOSEN = "loosen"
+
+
+STRATEGIES = tuple(s.value for s in Strategy)
 DEFAULT_MAX_NOK = 3
 PSET_MAX = 999
 RULE_KEYS = ("max_nok", "strategy", "loosen_pset", "count_in_batch")
@@ -50,10 +62,14 @@ class NokRule:
     loosens it (``strategy`` loosen, and a loosen command)."""
 
     max_nok: int = DEFAULT_MAX_NOK
-    strategy: str = "repeat"
+    strategy: Strategy = Strategy.REPEAT
     loosen_pset: int | None = None
     #: a NOK counts in the bolt's batch (and order): the sequence goes on without an OK
     count_in_batch: bool = False
+
+    def __post_init__(self) -> None:
+        # the word of a file or a test, typed (ValueError for one that is no strategy)
+        object.__setattr__(self, "strategy", Strategy(self.strategy))
 
     def merged(self, node: YamlNode, keys: tuple[str, ...] = RULE_KEYS) -> NokRule:
         """This rule with what ``node`` overrides (refused with its line when it cannot be
@@ -63,12 +79,12 @@ class NokRule:
         if "max_nok" in m:
             rule = replace(rule, max_nok=m["max_nok"].integer(lo=1, hi=99))
         if "strategy" in m:
-            rule = replace(rule, strategy=m["strategy"].text(STRATEGIES))
+            rule = replace(rule, strategy=Strategy(m["strategy"].text(STRATEGIES)))
         if "loosen_pset" in m:
             rule = replace(rule, loosen_pset=m["loosen_pset"].integer(lo=1, hi=PSET_MAX))
         if "count_in_batch" in m:
             rule = replace(rule, count_in_batch=m["count_in_batch"].flag())
-        if rule.strategy == "loosen" and rule.loosen_pset is None:
+        if rule.strategy is Strategy.LOOSEN and rule.loosen_pset is None:
             raise m.get("strategy", node).error(
                 "loosen needs a loosen_pset: the controller's program that loosens the bolt "
                 "before it is tightened again")
@@ -98,7 +114,7 @@ class NokPolicy:
         psets: dict[int, NokRule] = {}
         for key, item in _pset_items(m):
             psets[key] = rule = default.merged(item)
-            if rule.strategy == "loosen" and rule.loosen_pset == key:
+            if rule.strategy is Strategy.LOOSEN and rule.loosen_pset == key:
                 raise item.error(f"pset {key}: its loosen_pset is the pset itself: the "
                                  "'loosening' would tighten again")
         bolts = {key: default.merged(item) for key, item in _bolt_items(m)}
@@ -168,14 +184,15 @@ def unused_loosen_psets(node: YamlNode, policy: NokPolicy) -> list[ConfigError]:
     for where, rule, inherit in levels:
         given = where.mapping((*RULE_KEYS, "psets", "bolts")) if where is node \
             else where.mapping(RULE_KEYS)
-        if "loosen_pset" not in given or rule.strategy == "loosen":
+        if "loosen_pset" not in given or rule.strategy is Strategy.LOOSEN:
             continue
-        if any(r.strategy == "loosen" and r.loosen_pset == rule.loosen_pset for r in inherit):
+        if any(r.strategy is Strategy.LOOSEN and r.loosen_pset == rule.loosen_pset
+               for r in inherit):
             continue
         warnings.append(given["loosen_pset"].error(
             f"loosen_pset {rule.loosen_pset} is not used: strategy {rule.strategy} "
             + ("tightens the bolt again after a NOK without loosening it"
-               if rule.strategy == "repeat" else "skips the bolt after a NOK")
+               if rule.strategy is Strategy.REPEAT else "skips the bolt after a NOK")
             + " (strategy: loosen loosens it first)"))
     return warnings
 

@@ -34,7 +34,7 @@ from stationd.station.events import (
 )
 from stationd.station.inputs import CommandIn, LiftRead, LoadedBolt
 from stationd.station.matching import BoltMatcher, MatchParams
-from stationd.station.policy import NokPolicy, NokRule
+from stationd.station.policy import NokPolicy, NokRule, Strategy
 from stationd.station.trust import PairTrust
 
 #: a result this long after the tool went off is not the last bolt's late one: the tool cannot
@@ -645,7 +645,7 @@ class CoreState:
         if self.matcher is not None and bolt in self.matcher.done:
             return
         rule = self._nok_rule(bolt)
-        if rule.strategy == "loosen" and rule.loosen_pset is not None:
+        if rule.strategy is Strategy.LOOSEN and rule.loosen_pset is not None:
             self._loosen.add(bolt)
 
     def _nok_rule(self, bolt: str, pset: int | None = None) -> NokRule:

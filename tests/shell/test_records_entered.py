@@ -18,7 +18,7 @@ from stationd.station.commands import EnterOutcome, Issuer, Right
 from stationd.station.core import StationCore
 from stationd.station.events import ResultRecorded
 from stationd.station.inputs import CommandDone, CommandIn, VehicleLoaded
-from stationd.station.policy import NokPolicy, NokRule
+from stationd.station.policy import NokPolicy, NokRule, Strategy
 from tests.db.conftest import BASE, record, url_of
 from tests.station.test_core import PARAMS, published
 
@@ -50,7 +50,7 @@ def test_a_held_loosening_s_entered_ok_is_a_loosening_after_a_restart(tmp_path: 
     assert again.held == {"B1": "tightening 2"}
     assert again.held_under == {"B1": HeldUnder(True, 90)}
     assert again.status["B1"] == NOK
-    core = StationCore(PARAMS, leave_frames=2, nok=NokPolicy(NokRule(3, "loosen", 90)))
+    core = StationCore(PARAMS, leave_frames=2, nok=NokPolicy(NokRule(3, Strategy.LOOSEN, 90)))
     core.feed(again)
     assert core.status().held == {"B1"}
     acts = core.feed(CommandIn(time.time(), 1, EnterOutcome(

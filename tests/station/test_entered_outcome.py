@@ -33,7 +33,7 @@ from stationd.station.events import (
 )
 from stationd.station.inputs import CommandDone, CommandIn, ResultIn, UnreadableIn, VehicleLoaded
 from stationd.station.lift import held_a_loosening
-from stationd.station.policy import NokPolicy, NokRule
+from stationd.station.policy import NokPolicy, NokRule, Strategy
 from stationd.words import answer_words, notice_words, reason_words, state_words
 from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
 from tests.station.test_core import BOLTS, PARAMS, Driver, _on, _ready, published
@@ -246,7 +246,7 @@ def test_a_nok_entered_counts_in_the_row_and_locks_at_max_nok():
 
 
 def test_a_nok_entered_under_loosen_sends_the_loosen_pset_next():
-    d = _ready(nok=NokPolicy(NokRule(3, "loosen", 90)))
+    d = _ready(nok=NokPolicy(NokRule(3, Strategy.LOOSEN, 90)))
     _held(d)
     acts = d.command(1, nok(), SUPERVISOR)
     [loosen] = published(acts, BoltToLoosen)
@@ -265,7 +265,7 @@ def test_an_entered_ok_ends_a_nok_row():
 
 
 # -- a held loosening: the outcome entered is a loosening's -------------------------------------
-LOOSEN = NokPolicy(NokRule(3, "loosen", 90))
+LOOSEN = NokPolicy(NokRule(3, Strategy.LOOSEN, 90))
 
 
 def _held_loosening(d: Driver, tid: int = 2) -> list[Any]:
@@ -368,7 +368,7 @@ def test_a_nok_entered_for_a_held_loosening_counts_as_a_loosening_nok():
 
 
 def test_a_nok_entered_for_a_held_loosening_locks_at_max_nok_as_a_measured_one():
-    d = _ready(nok=NokPolicy(NokRule(2, "loosen", 90)))
+    d = _ready(nok=NokPolicy(NokRule(2, Strategy.LOOSEN, 90)))
     _held_loosening(d)
     acts = d.command(1, EnterOutcome("VIN1", "B1", False, 60.0, 2.0, "stuck"), SUPERVISOR)
     [lock] = published(acts, BoltLocked)

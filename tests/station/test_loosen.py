@@ -36,7 +36,7 @@ from stationd.station.events import (
     VehicleOpened,
 )
 from stationd.station.inputs import CommandDone, CommandIn, ModelsKnown, ResultIn, VehicleLoaded
-from stationd.station.policy import NokPolicy, NokRule
+from stationd.station.policy import NokPolicy, NokRule, Strategy
 from stationd.station.results import rundown_kind
 from stationd.station.state import LOOSEN_TARGETS
 from stationd.words import answer_words, reason_words
@@ -46,8 +46,9 @@ from tests.station.test_core import BOLTS, PARAMS, Driver, _on, _ready, publishe
 LOOSENER = Issuer("lea", frozenset({Right.LOOSEN}), "screen 10.0.0.9")
 #: B1 and B3 (pset 1) loosen first with pset 90, B2 (pset 2) is skipped after a NOK, B3
 #: loosens with its own pset 91 after two NOKs in a row lock it
-POLICY = NokPolicy(NokRule(3, "loosen", 90), psets={2: NokRule(2, "skip", 92)},
-                   bolts={"B3": NokRule(2, "loosen", 91)})
+POLICY = NokPolicy(NokRule(3, Strategy.LOOSEN, 90),
+                   psets={2: NokRule(2, Strategy.SKIP, 92)},
+                   bolts={"B3": NokRule(2, Strategy.LOOSEN, 91)})
 
 
 def res(tid: int, pset: int, ok: bool, rtype: int | None = None) -> Any:
@@ -170,8 +171,9 @@ def test_the_loosen_command_reopens_an_ok_bolt_with_the_right_only():
 
 
 def test_loosen_commands_against_the_rules_are_refused_and_change_nothing():
-    d = _driver(NokPolicy(NokRule(3, "loosen", 90), bolts={"B2": NokRule(3, "repeat", 90),
-                                                         "B3": NokRule(3, "repeat")}))
+    d = _driver(NokPolicy(NokRule(3, Strategy.LOOSEN, 90),
+                          bolts={"B2": NokRule(3, Strategy.REPEAT, 90),
+                                 "B3": NokRule(3, Strategy.REPEAT)}))
     want = {
         LoosenBolt("VIN1", "B1"): Reason(Why.NOTHING_TO_LOOSEN, bolt="B1"),
         LoosenBolt("VIN1", "B3"): Reason(Why.NO_LOOSEN_PSET, bolt="B3"),
@@ -240,7 +242,7 @@ def test_a_loosening_that_did_not_come_loose_is_loosened_again_after_a_reload():
     person's loosen command, the loosening NOK (the joint still tight).  Live, its loosen
     pset goes again; after a reload its tightening pset went (the report says nok, and only
     the loosen strategy put a NOK back on the list)."""
-    policy = NokPolicy(NokRule(3, "repeat", 90))
+    policy = NokPolicy(NokRule(3, Strategy.REPEAT, 90))
     live = _driver(policy)
     _rundown(live, 1, 1, ok=True, rtype=1)
     assert _command(live, 1, LoosenBolt("VIN1", "B1", "rework"), LOOSENER).answer.accepted
@@ -438,7 +440,7 @@ def test_a_released_hold_is_loosened_first_under_the_loosen_strategy():
     assert "B1" in core._loosen
     assert {b.bolt: (b.status, b.check_first) for b in opened.bolts}["B1"] == (TO_LOOSEN, True)
     # repeat: tightened again (the supervisor's release says it may be tightened already)
-    plain = StationCore(PARAMS, leave_frames=2, nok=NokPolicy(NokRule(3, "repeat")))
+    plain = StationCore(PARAMS, leave_frames=2, nok=NokPolicy(NokRule(3, Strategy.REPEAT)))
     plain.feed(VehicleLoaded(1.0, "VIN1", "M", BOLTS, released=frozenset({"B1"})))
     assert plain._loosen == set()
 
