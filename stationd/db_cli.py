@@ -317,6 +317,18 @@ def _export_results(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _made_on(u: dict[str, Any], vin: str) -> str:
+    """Where a result stored with this vehicle was made when the controller says another
+    vehicle (its VIN, MID 0061's), and when: results fetched after a restore or an outage are
+    stored with the vehicle at height then, and read as its own without this (a technician's
+    trial: a hundred of other vehicles' rundowns under the one on the lift)."""
+    made = u.get("controller_vin")
+    if not made or made == vin:
+        return ""
+    at = u.get("result_at")
+    return f", made on {made}" + (f" at {at:%Y-%m-%d %H:%M:%S} UTC" if at is not None else "")
+
+
 def _when(run: dict[str, Any]) -> str:
     """When a rundown was made, as the station took its result (``result_at``), and when it
     was stored where that was later (a result kept while the database was down: dated by its
@@ -496,7 +508,8 @@ def cmd_db_report(args: argparse.Namespace) -> int:
             print(f"  unattributed: {result_type_words(u['result_type'])} "
                   f"{u['tightening_id']} pset {u['pset']} "
                   f"{u['status'].upper()} {_num(u['torque_nm'])} Nm, "
-                  f"{_num(u['angle_deg'])} deg ({u['reason']})" + entered_as_words(u["entered_as"]))
+                  f"{_num(u['angle_deg'])} deg{_made_on(u, args.vin)} ({u['reason']})"
+                  + entered_as_words(u["entered_as"]))
         holds = dict(report.held)
         for e in events:
             if e["what"] in HOLD_WORDS:    # no result: what the station knows of it

@@ -151,6 +151,15 @@ def test_report_exit_codes(run, db):
             repo.others.record_unattributed(vin="VIN1", controller_vin=None, tightening_id=tid,
                                             pset=4, ok=True, torque_nm=9.5, angle_deg=12.0,
                                             result_at=None, reason="fetched", result_type=code)
+        # fetched with VIN1 at height, made on another vehicle (the controller says which):
+        # said, or it reads as VIN1's (a technician's trial, after a restore)
+        repo.others.record_unattributed(
+            vin="VIN1", controller_vin="VIN0", tightening_id=80, pset=4, ok=True,
+            torque_nm=9.5, angle_deg=12.0, result_at=datetime(2026, 12, 1, 6, 30, tzinfo=UTC),
+            reason="fetched", result_type=1)
+        repo.others.record_unattributed(
+            vin="VIN1", controller_vin="VIN1", tightening_id=81, pset=4, ok=True,
+            torque_nm=9.5, angle_deg=12.0, result_at=None, reason="fetched", result_type=1)
         repo.close_vehicle("VIN1")
     code, out, _ = run("db", "report", "VIN1", "--db", db)
     # SF-FR tightened again to OK: no bolt ends NOK, its NOK result is still said
@@ -161,6 +170,10 @@ def test_report_exit_codes(run, db):
     assert "unattributed: tightening 77 pset 4 NOK 9.5 Nm" in out
     assert "unattributed: loosening 78 pset 4 OK" in out
     assert "unattributed: result 79 pset 4 OK" in out
+    assert ("unattributed: tightening 80 pset 4 OK 9.5 Nm, 12.0 deg, made on VIN0 at "
+            "2026-12-01 06:30:00 UTC (fetched)") in out
+    assert "unattributed: tightening 81 pset 4 OK 9.5 Nm, 12.0 deg (fetched)" in out
+    assert "made on" not in out.replace("made on VIN0", "")
     assert "OK       50.0 Nm, 35.0 deg, v1, 2 attempts" in out and " N m" not in out
     assert "2. tightening OK pset 2, 50.0 Nm, 35.0 deg, at " in out
     # dated when the station took it, and when it was stored (an operator trial: a rundown
@@ -170,7 +183,7 @@ def test_report_exit_codes(run, db):
                      late), late
     code, out, _ = run("db", "report", "VIN1", "--db", db, "--json")
     assert [(u["tightening_id"], u["result_type"]) for u in json.loads(out)[
-        "unattributed"]] == [(77, 1), (78, 2), (79, None)]
+        "unattributed"]] == [(77, 1), (78, 2), (79, None), (80, 1), (81, 1)]
     code, out, err = run("db", "report", "NOPE", "--db", db)
     assert code == 2 and out == ""
     assert _one_line(err) == "stationd: error: vehicle 'NOPE' is not in the database"

@@ -306,6 +306,10 @@ def test_a_bolt_held_for_a_lost_push_is_not_said_never_tightened(live_server, pa
     repo.others.record_unattributed(vin=VIN, controller_vin=None, tightening_id=41, pset=1, ok=True,
                                     torque_nm=49.6, angle_deg=31.0, result_at=None,
                                     reason="fetched after a later one came, the link up")
+    # fetched with this vehicle at height, made on another (a restore's catch-up): said
+    repo.others.record_unattributed(vin=VIN, controller_vin="9SDST0099TL000042",
+                                    tightening_id=52, pset=1, ok=True, torque_nm=49.0,
+                                    angle_deg=30.0, result_at=None, reason="fetched")
     repo.others.record_controller_event(result_type=0, what=LOST_UNKNOWN, vin=VIN, bolt="B3",
                                         controller_vin=None, tightening_id=None, pset=1, ok=None,
                                         torque_nm=None, angle_deg=None, result_at=None,
@@ -319,6 +323,10 @@ def test_a_bolt_held_for_a_lost_push_is_not_said_never_tightened(live_server, pa
         assert "HELD: tightening 41 may be its own" in b3, b3
         assert ("held: no rundown recorded to it, but tightening 41 may be its own (OK 49.6 "
                 "Nm, 31 deg, stored unattributed)") in b3, b3
+        page.wait(lambda p: "made on" in (p.text("#others tbody") or ""), what="the others")
+        others = (page.text("#others tbody") or "").splitlines()
+        assert [line for line in others if "made on" in line] == [
+            line for line in others if "52" in line and "made on 9SDST0099TL000042" in line]
     finally:
         repo.close()
 

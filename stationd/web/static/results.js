@@ -190,10 +190,14 @@ function showOthers(v) {
       rows.push([e.recorded_at, e.what, e.tightening_id, e.pset,
                  e.bolt ? `tool on ${e.bolt}` : "-", "not a rundown"]);
   }
-  for (const u of v.unattributed || [])
+  for (const u of v.unattributed || []) {
+    // made on another vehicle (the controller says which): said, or it reads as this one's
+    const made = u.controller_vin && u.controller_vin !== v.vin
+      ? `, made on ${u.controller_vin}` : "";
     rows.push([u.recorded_at, `unattributed ${u.what}`, u.tightening_id, u.pset, "-",
                `${(u.status || "").toUpperCase()} ${fmt(u.torque_nm, 1)} Nm, ` +
-               `${fmt(u.angle_deg, 0)} deg (${u.reason})`]);
+               `${fmt(u.angle_deg, 0)} deg${made} (${u.reason})`]);
+  }
   rows.sort((a, b) => String(a[0]).localeCompare(String(b[0])));
   const tb = q("#others tbody");
   tb.replaceChildren();
