@@ -188,3 +188,12 @@ def test_frames_that_came_broken_are_said_as_packets_lost_not_a_trigger_missed()
     assert said.startswith("no whole frame within 1 s: 1 broken buffer: timeout (")
     assert "packets lost" in said and "trigger" not in said
     assert no_frame_words(0.5, "free", "") == "no frame within 0.5 s"
+
+
+def test_the_camera_says_its_serial_number(fake):
+    """The serial number a pair's calibration is pinned to (GenICam DeviceSerialNumber, as
+    Aravis reads it), the one the journal names; none while the link is down."""
+    with open_camera(fake.url(SMALL)) as cam:
+        serial = cam.serial_number()
+        assert serial and f"S/N {serial} " in cam.identity()
+    assert cam.serial_number() is None
