@@ -196,7 +196,7 @@ class CameraDevice(Device):
         """The camera's serial number as it reports it; None where the backend cannot tell
         one unit from another.  The station pins a pair's calibration to the serials it was
         first used with, so that a camera replaced without calibrating the pair again is
-        refused rather than trusted (``stationd.shell.pins``)."""
+        refused rather than trusted (``db.cameras``)."""
         return None
 
     # -- hooks --------------------------------------------------------------------------

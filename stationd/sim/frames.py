@@ -211,29 +211,43 @@ def _in_memory_file(image: np.ndarray) -> tuple[int, np.ndarray]:
     return fd, view
 
 
-def resident(images: list[np.ndarray]) -> int:
-    """The resident size (``Rss`` of ``/proc/self/smaps``) of the mappings that hold
-    ``images``, each mapping once; an image in no mapping of its own (the heap's) counts its
-    size.  Read once at a benchmark's end: the file lists every mapping of the process."""
+def mappings() -> list[tuple[int, int, dict[str, int]]]:
+    """Each mapping of this process: its start and end addresses and its sizes in bytes as
+    ``/proc/self/smaps`` gives them (``Rss``, ``Anonymous``, ...); empty where there is no
+    such file."""
     try:
         text = Path("/proc/self/smaps").read_text()
     except OSError:
-        return sum(im.nbytes for im in images)
-    spans: list[tuple[int, int, int]] = []     # start, end, Rss bytes
-    start = end = 0
+        return []
+    out: list[tuple[int, int, dict[str, int]]] = []
     for line in text.splitlines():
         head = line.split(" ", 1)[0]
         if "-" in head and not head.endswith(":"):
             lo, hi = head.split("-")
-            start, end = int(lo, 16), int(hi, 16)
-        elif head == "Rss:":
-            spans.append((start, end, int(line.split()[1]) * 1024))
+            out.append((int(lo, 16), int(hi, 16), {}))
+        elif out and line.endswith(" kB"):
+            out[-1][2][head.rstrip(":")] = int(line.split()[1]) * 1024
+    return out
+
+
+def mapping_of(image: np.ndarray, maps: list[tuple[int, int, dict[str, int]]]
+               ) -> tuple[int, dict[str, int]] | None:
+    """The start and the sizes of the mapping (of ``maps``) that holds ``image``'s pixels."""
+    at = image.__array_interface__["data"][0]
+    return next(((lo, sizes) for lo, hi, sizes in maps if lo <= at < hi), None)
+
+
+def resident(images: list[np.ndarray]) -> int:
+    """The resident size (``Rss``) of the mappings that hold ``images``, each mapping once; an
+    image in no mapping of its own (the heap's) counts its size.  Read once at a benchmark's
+    end: smaps lists every mapping of the process."""
+    maps = mappings()
     seen: dict[int, int] = {}
     for im in images:
-        at = im.__array_interface__["data"][0]
-        span = next(((lo, rss) for lo, hi, rss in spans if lo <= at < hi), None)
-        if span is None or span[1] > im.nbytes + 2 * mmap.PAGESIZE:
+        found = mapping_of(im, maps)
+        rss = None if found is None else found[1].get("Rss")
+        if found is None or rss is None or rss > im.nbytes + 2 * mmap.PAGESIZE:
             seen[id(im)] = im.nbytes    # in a larger mapping (the heap): its own size
         else:
-            seen[span[0]] = span[1]
+            seen[found[0]] = rss
     return sum(seen.values())

@@ -1,10 +1,8 @@
-from pathlib import Path
-
 import numpy as np
 
 from stationd.geometry.camera import Camera
 from stationd.sim import backgrounds
-from stationd.sim.frames import FrameSource
+from stationd.sim.frames import FrameSource, mapping_of, mappings
 from stationd.sim.render import MarkerPose, Scene, render
 from stationd.vision.marker import MarkerSpec
 
@@ -92,23 +90,6 @@ def test_a_released_buffer_is_reused_with_the_old_window_put_back():
     assert np.array_equal(second, _expected(src, b))   # and nothing of a is left
 
 
-def _mapping(image: np.ndarray) -> dict[str, int]:
-    """The smaps fields (bytes) of the mapping that holds ``image``."""
-    at = image.__array_interface__["data"][0]
-    fields: dict[str, int] = {}
-    inside = False
-    for line in Path("/proc/self/smaps").read_text().splitlines():
-        head = line.split(" ", 1)[0]
-        if "-" in head and not head.endswith(":"):
-            lo, hi = (int(v, 16) for v in head.split("-"))
-            if inside:
-                break
-            inside = lo <= at < hi
-        elif inside and line.endswith(" kB"):
-            fields[head.rstrip(":")] = int(line.split()[1]) * 1024
-    return fields
-
-
 def test_a_buffer_costs_the_pages_its_windows_were_written_into() -> None:
     """The pool's buffers share the background's pages: one holds only what its windows
     changed (copied by the kernel on the first write: the mapping's anonymous pages), and the
@@ -118,7 +99,9 @@ def test_a_buffer_costs_the_pages_its_windows_were_written_into() -> None:
     frames = [src.compose(a), src.compose(b)]       # two held: two buffers
     assert not src.background.flags.writeable
     for frame, ((_, _, w, h), _px) in zip(frames, (a, b), strict=True):
-        copied = _mapping(frame)["Anonymous"]
+        found = mapping_of(frame, mappings())
+        assert found is not None
+        copied = found[1]["Anonymous"]
         assert w * h * 3 <= copied <= h * (-(-w * 3 // 4096) + 1) * 4096
         assert copied < frame.nbytes / 2
     for frame, patch in zip(frames, (a, b), strict=True):   # read whole: mapped whole
