@@ -33,6 +33,7 @@ from db.kinds import (
     LOOSENING,
     RUNDOWN_KINDS,
     TIGHTENING,
+    verdict,
 )
 from db.ledger import RUNDOWN, add_command, append
 from db.models import (
@@ -126,7 +127,7 @@ def record_entered(repo: Repository, *, vin: str, bolt: str, ok: bool, torque_nm
                 z_mm=z, match_distance_mm=float(sel.get("distance_mm", 0.0)),
                 tilt_deg=float(sel.get("tilt_deg", 0.0)),
                 params_sent=sent, acknowledged=True,
-                status="ok" if ok else "nok", torque_nm=float(torque_nm),
+                status=verdict(ok), torque_nm=float(torque_nm),
                 angle_deg=float(angle_deg),
                 tightening_id=tightening_id,
                 sent_at=enable.enabled_at if enable is not None else None,

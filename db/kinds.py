@@ -45,6 +45,11 @@ OK, NOK, MISSING, LOOSENED, TO_LOOSEN = (BoltStatus.OK, BoltStatus.NOK, BoltStat
                                          BoltStatus.LOOSENED, BoltStatus.TO_LOOSEN)
 SKIPPED, PENDING = BoltStatus.SKIPPED, BoltStatus.PENDING
 
+
+def verdict(ok: bool) -> BoltStatus:
+    """The status a rundown's OK flag gives its record: one spelling wherever one is stored."""
+    return OK if ok else NOK
+
 #: an OK result without a result type (a controller revision that reports none, or a register
 #: map without one) whose torque lies outside its bolt's torque window: perhaps no tightening
 #: at all (a batch increment reads so at such a revision, an OK of 0 Nm), so never taken for

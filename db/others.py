@@ -17,7 +17,7 @@ from sqlalchemy import select
 from db.copies import COPY_SLACK, opt_float, same_result, unreadable_copy
 from db.enables import settle
 from db.engine import Transactions
-from db.kinds import HELD_WITHOUT_RESULT
+from db.kinds import HELD_WITHOUT_RESULT, verdict
 from db.ledger import CONTROLLER_EVENT, GAP, UNATTRIBUTED, UNREADABLE, append
 from db.models import (
     Bolt,
@@ -59,7 +59,7 @@ class OtherResults:
                         return None
             row = UnattributedResult(
                 vin=vin, controller_vin=controller_vin, tightening_id=tightening_id, pset=pset,
-                status="ok" if ok else "nok", torque_nm=torque, angle_deg=angle,
+                status=verdict(ok), torque_nm=torque, angle_deg=angle,
                 result_at=result_at, recorded_at=utcnow(), reason=reason[:200],
                 result_type=result_type)
             s.add(row)
@@ -97,7 +97,7 @@ class OtherResults:
             row = ControllerEvent(
                 result_type=int(result_type), what=what[:32], vin=vin, bolt=bolt,
                 controller_vin=controller_vin, tightening_id=tightening_id, pset=pset,
-                status=None if ok is None else "ok" if ok else "nok",
+                status=None if ok is None else verdict(ok),
                 torque_nm=opt_float(torque_nm), angle_deg=opt_float(angle_deg),
                 result_at=result_at, recorded_at=utcnow(),
                 note=None if note is None else note[:500])

@@ -25,7 +25,7 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from db.kinds import TIGHTENING
+from db.kinds import NOK, OK, TIGHTENING
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
 
 MIN_N = 5    # fewer results than this give no capability figure
@@ -60,7 +60,7 @@ def _point(rec: TighteningRecord) -> dict[str, Any]:
     """One result for the plot: its values, OK or not, and when it was recorded (UTC, ISO)."""
     return {"torque": None if rec.torque_nm is None else float(rec.torque_nm),
             "angle": None if rec.angle_deg is None else float(rec.angle_deg),
-            "ok": rec.status == "ok", "at": rec.recorded_at.isoformat(),
+            "ok": rec.status == OK, "at": rec.recorded_at.isoformat(),
             "entered": rec.entered_by is not None}
 
 
@@ -90,7 +90,7 @@ def spc(s: Session, model: str | None = None, since: datetime | None = None,
     for rec, bolt, mname, p in s.execute(q):
         day = rec.recorded_at.date().isoformat()
         days[day][0] += 1
-        days[day][1] += rec.status == "nok"
+        days[day][1] += rec.status == NOK
         limits = (p.torque_min, p.torque_target, p.torque_max,
                   p.angle_min, p.angle_target, p.angle_max)
         g = groups.setdefault((mname, bolt, p.pset, *limits), {
@@ -99,13 +99,13 @@ def spc(s: Session, model: str | None = None, since: datetime | None = None,
             "version": p.version,
             "last": deque(maxlen=max(0, last))})
         g["last"].append(_point(rec))
-        g["nok"] += rec.status != "ok"
+        g["nok"] += rec.status != OK
         if rec.entered_by is not None:
             # typed in by a person from the controller's screen (its result could not be
             # read): counted, never measured: not in the capability (a new user's trial: an
             # entered 106.7 Nm in a bolt's mean)
-            g["entered"] += rec.status == "ok"
-            g["entered_nok"] += rec.status != "ok"   # in "nok", said apart (not in n)
+            g["entered"] += rec.status == OK
+            g["entered_nok"] += rec.status != OK   # in "nok", said apart (not in n)
             continue
         if rec.torque_nm is not None:
             g["torque"].append(float(rec.torque_nm))

@@ -42,9 +42,11 @@ from db.kinds import (
     HELD_WITHOUT_RESULT,
     LOCK,
     LOOSENING,
+    OK,
     RUNDOWN_KINDS,
     TIGHTENING,
     HeldUnder,
+    verdict,
 )
 from db.ledger import (
     CLOSING,
@@ -406,7 +408,7 @@ class Repository:
                 vehicle_id=v.id, bolt_id=b.id, parameters_id=version.id, x_mm=x, y_mm=y,
                 z_mm=z, match_distance_mm=float(match_distance_mm), tilt_deg=float(tilt_deg),
                 params_sent=sent, acknowledged=bool(acknowledged),
-                status="ok" if ok else "nok", torque_nm=opt_float(torque_nm),
+                status=verdict(ok), torque_nm=opt_float(torque_nm),
                 angle_deg=opt_float(angle_deg),
                 tightening_id=None if tightening_id is None else int(tightening_id),
                 sent_at=sent_at, result_at=result_at, recorded_at=utcnow(),
@@ -440,9 +442,9 @@ class Repository:
             streak: dict[str, int] = {}
             for code, status, at, kind in s.execute(q):
                 if (code in releases and at <= releases[code]) or \
-                        (status == "ok" and kind != LOOSENING):
+                        (status == OK and kind != LOOSENING):
                     streak[code] = 0
-                elif status == "ok":
+                elif status == OK:
                     streak.setdefault(code, 0)
                 else:
                     streak[code] = streak.get(code, 0) + 1

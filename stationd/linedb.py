@@ -75,7 +75,7 @@ from sqlalchemy.dialects.postgresql import JSONB
 from sqlalchemy.exc import DBAPIError
 from sqlalchemy.schema import SetColumnComment, SetTableComment
 
-from db.kinds import LOOSENING, NOK, OK, TIGHTENING
+from db.kinds import LOOSENING, NOK, OK, TIGHTENING, verdict
 from db.ledger import (
     CHECK,
     CLOSING,
@@ -809,7 +809,7 @@ class LineResult:
         (tt, tmin, tmax), (at, amin, amax) = self.torque, self.angle
         return {"station_id": self.station_id, "db_id": self.db_id, "seq": self.seq,
                 "at": self.at.isoformat(), "vin": self.vin, "model": self.model,
-                "bolt": self.bolt, "ok": self.ok, "status": "ok" if self.ok else "nok",
+                "bolt": self.bolt, "ok": self.ok, "status": verdict(self.ok),
                 "kind": self.kind, "torque_nm": self.torque_nm, "angle_deg": self.angle_deg,
                 "parameters_version": self.version, "parameter_version": self.version,
                 "received_at": self.received_at.isoformat(), "operator": self.operator,

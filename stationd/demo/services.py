@@ -32,6 +32,7 @@ from sqlalchemy import make_url
 from sqlalchemy.exc import SQLAlchemyError
 
 from db.errors import DbError
+from db.kinds import LOOSENING
 from db.repository import Repository
 from drivers.counting import counted
 from stationd.bus import EventBus
@@ -372,7 +373,7 @@ def line_summary(rows: list[LineResult], stations: list[str]) -> dict[str, Any]:
     for r in rows:
         p = per.setdefault(r.station_id, empty())
         p["rundowns"] += 1
-        if r.kind == "loosening":
+        if r.kind == LOOSENING:
             p["loosenings"] += 1
             continue
         p["ok" if r.ok else "nok"] += 1

@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from db.kinds import LOOSENING
 from drivers.counting import counted
 from drivers.wrench.sim.controller import SimPset
 from stationd import progress
@@ -807,7 +808,7 @@ def _summary(st: Station, report: list[dict[str, Any]], cycles: int,
             "results": results, "recorded": recorded,
             "nok_policy": {
                 "nok": sum(1 for e in recorded_events if not e.ok),
-                "loosenings": sum(1 for e in recorded_events if e.kind == "loosening"),
+                "loosenings": sum(1 for e in recorded_events if e.kind == LOOSENING),
                 "locks": st.bus.count(BoltLocked), "releases": st.bus.count(BoltReleased),
                 "locked_sends": locked_sends},
             # every rundown recorded with the operator signed in (the simulated one)

@@ -22,7 +22,7 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from typing import Any
 
-from db.kinds import UNKNOWN_TYPE_HELD, message_words
+from db.kinds import LOOSENING, OK, TIGHTENING, UNKNOWN_TYPE_HELD, message_words
 from db.ledger import CONTROLLER_EVENT as CONTROLLER_EVENT_KIND
 from db.ledger import RUNDOWN as RUNDOWN_KIND
 from db.ledger import UNATTRIBUTED as UNATTRIBUTED_KIND
@@ -63,7 +63,7 @@ def message(rec: dict[str, Any]) -> str:
     the metadata's AssemblyType without the types) must not take a loosening for one more
     tightened joint, nor an outcome a person entered for one the station measured, and finds
     the rundown on the controller by its id."""
-    kind = "loosening" if rec.get("rundown") == "loosening" else "tightening"
+    kind = LOOSENING if rec.get("rundown") == LOOSENING else TIGHTENING
     tid = rec.get("tightening_id")
     # the id after the verdict, in parentheses, in words without "tightening" (an MES that
     # looks for the word must not take a loosening for one; split on blanks the verdict
@@ -247,8 +247,8 @@ def rundown_result(db_id: str, station_id: str, entry: dict[str, Any], *,
     """The ResultDataType of the feed ``entry`` of kind ``rundown``, with its ``curves``
     (:mod:`db.curves`' or the feed's, one per trace type) as its trace when it has any."""
     rec = entry["record"]
-    ok = rec["status"] == "ok"
-    loosening = rec.get("rundown") == "loosening"
+    ok = rec["status"] == OK
+    loosening = rec.get("rundown") == LOOSENING
     entities = [
         ua.EntityDataType(Name="VIN", EntityId=rec["vin"], EntityType=ENTITY_VEHICLE,
                           IsExternal=True),
@@ -361,9 +361,9 @@ def unattributed_result(db_id: str, entry: dict[str, Any], *, simulated: bool = 
     controller's rundowns from the station's results missed these (a rundown outside any
     tool enable, a result fetched late that nothing proves a bolt's)."""
     rec = entry["record"]
-    ok = rec["status"] == "ok"
+    ok = rec["status"] == OK
     loosening = rec.get("result_type") == LOOSENING_TYPE
-    kind = "loosening" if loosening else "tightening"
+    kind = LOOSENING if loosening else TIGHTENING
     pset = "" if rec.get("pset") is None else f" with pset {rec['pset']}"
     meta = _meta(
         db_id, entry, simulated=simulated, evaluation=EVALUATION_OK if ok else

@@ -27,7 +27,7 @@ from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
 from db.curves import curves_of_records
-from db.kinds import LOOSENING, MISSING, PENDING, SKIPPED, message_words
+from db.kinds import LOOSENING, MISSING, NOK, PENDING, SKIPPED, message_words
 from db.ledger import COMMAND, CONTROLLER_EVENT, RUNDOWN, UNATTRIBUTED, UNREADABLE
 from db.models import Bolt, ProcessParameters, TighteningRecord, Vehicle, VehicleModel
 from db.repository import Repository
@@ -339,7 +339,7 @@ def _after_nok(rows: list[dict[str, Any]], at: str, bolt: str) -> int:
     place = 0
     for k, r in enumerate(rows):
         t, sent = r.get("result_at"), r.get("sent_at")
-        if r.get("bolt") == bolt and r.get("status") == "nok" and t is not None \
+        if r.get("bolt") == bolt and r.get("status") == NOK and t is not None \
                 and datetime.fromisoformat(t) <= latest \
                 and (sent is None or datetime.fromisoformat(sent) <= when):
             place = k + 1
