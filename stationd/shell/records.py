@@ -945,9 +945,9 @@ def controller_time(r: TighteningResult) -> datetime | None:
     """The controller's own time of the result (aware, UTC); None where it has no clock (a
     register-driven controller: the station stamped it as it read it, and a copy read again
     after a reload gets another stamp) or none was given."""
-    if not getattr(r, "controller_clock", True):
+    if not r.controller_clock:
         return None
-    return _aware(getattr(r, "timestamp", None))
+    return _aware(r.timestamp)
 
 
 def _aware(t: datetime | None) -> datetime | None:

@@ -59,9 +59,8 @@ from stationd.station.unread import UnreadRules, _Unread
 def _said(result: TighteningResult) -> object:
     """What a result says besides its id: equal for a copy the controller sends again,
     different for another result under the same id (a controller whose ids started again)."""
-    return (type_code(result), getattr(result, "pset", None), getattr(result, "ok", None),
-            getattr(result, "torque_nm", None), getattr(result, "angle_deg", None),
-            getattr(result, "timestamp", None))
+    return (type_code(result), result.pset, result.ok, result.torque_nm, result.angle_deg,
+            result.timestamp)
 
 
 def _copy_of(seen: object, result: TighteningResult) -> bool:
@@ -80,11 +79,9 @@ def _copy_of(seen: object, result: TighteningResult) -> bool:
 def type_code(result: TighteningResult) -> int | None:
     """A result's type code as the controller sent it (Open Protocol MID 0061 revision 3+,
     parameter 49), None where its revision (or the backend) carries none."""
-    code = getattr(result, "result_type_code", None)
-    if code is not None:
-        return int(code)
-    t = getattr(result, "result_type", None)
-    return None if t is None else int(t)
+    if result.result_type_code is not None:
+        return int(result.result_type_code)
+    return None if result.result_type is None else int(result.result_type)
 
 
 def rundown_kind(result: TighteningResult, sent_loosen: bool) -> str:
@@ -449,7 +446,7 @@ class ResultRules(UnreadRules):
         (then it is taken as today: a revision without types reports tightenings)."""
         if type_code(r) is not None or not bool(r.ok) or en.loosen:
             return None
-        if getattr(r, "torque_unit", None) is TorqueUnit.PERCENT:
+        if r.torque_unit is TorqueUnit.PERCENT:
             return None      # kept as sent: a percentage of the tool's maximum, not Nm
         window = en.torque_window
         spec = self._specs.get(en.bolt) if en.vin == self.vin else None

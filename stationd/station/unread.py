@@ -62,7 +62,7 @@ class _Unread:
         taken for a copy, it was lost and its bolt left open with the tool on.  With no time
         to tell, it is taken for the copy: recorded to the bolt enabled now, it would close a
         bolt perhaps never tightened."""
-        when = getattr(r, "timestamp", None)
+        when = r.timestamp
         if self.pset is not None and int(r.pset) != self.pset:
             return False
         if self.timestamp is not None and when is not None:

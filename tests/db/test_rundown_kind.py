@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import time
 from datetime import UTC, datetime
-from types import SimpleNamespace
 
 import pytest
 from sqlalchemy import create_engine
@@ -18,6 +17,7 @@ from db.repository import Repository
 from stationd.station.actions import Record
 from stationd.web.results import Results, rundowns_csv
 from tests.db.conftest import b1_selected, old_record, record, url_of
+from tests.rundowns import rundown
 
 
 def _status(repo: Repository, bolt: str) -> tuple[str, str | None]:
@@ -111,8 +111,7 @@ def test_records_before_the_migration_are_tightenings(tmp_path):
 
 def test_the_station_records_the_kind_and_the_loosen_pset_it_sent(tmp_path, bolts_file):
     _, records, repo, sel = b1_selected(tmp_path, bolts_file, 90, loosen=True)
-    result = SimpleNamespace(tightening_id=7, pset=90, ok=True, torque_nm=40.0,
-                             angle_deg=-720.0)
+    result = rundown(7, 90, torque_nm=40.0, angle_deg=-720.0)
     records.write(records.unsaved_result(
         Record("VIN1", "B1", result, sel, kind=LOOSENING, t=time.time()), None))
     [entry] = [e["record"] for e in repo.ledger.since(0) if e["kind"] == "rundown"]

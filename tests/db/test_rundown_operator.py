@@ -10,7 +10,6 @@ import io
 import json
 import time
 from datetime import UTC, datetime, timedelta
-from types import SimpleNamespace
 
 from sqlalchemy import create_engine, inspect
 
@@ -21,6 +20,7 @@ from stationd.shell.records import Records
 from stationd.station.actions import Record
 from stationd.web.results import Results, rundowns_csv
 from tests.db.conftest import b1_selected, old_record, record, url_of
+from tests.rundowns import rundown
 
 
 def test_a_database_of_the_last_revision_upgrades_and_its_records_have_no_operator(tmp_path):
@@ -76,7 +76,7 @@ def test_the_station_records_the_selections_operator_also_for_an_owed_enable(tmp
     # its torque window too: an OK without a type outside it is not taken for B1 after the
     # restart either (a reviewer)
     assert owed.selection.torque_window == (45.0, 55.0)
-    result = SimpleNamespace(tightening_id=7, pset=1, ok=True, torque_nm=50.0, angle_deg=30.0)
+    result = rundown(7, 1, torque_nm=50.0, angle_deg=30.0)
     again.write(again.unsaved_result(
         Record("VIN1", "B1", result, owed.selection, t=time.time()), None))
     assert [r["operator"] for r in Results(repo).rundowns("VIN1")] == ["olga"]

@@ -22,7 +22,7 @@ from typing import Any
 import pytest
 
 from drivers.errors import ConnectionLostError, ProtocolError, RefusedError
-from drivers.wrench.base import UnreadableResult
+from drivers.wrench.base import TighteningResult, UnreadableResult
 from stationd.shell.blocking import Blocking
 from stationd.shell.controller import ControllerFeed
 from stationd.station.inputs import (
@@ -34,6 +34,7 @@ from stationd.station.inputs import (
     ResultsSkipped,
     UnreadableIn,
 )
+from tests.rundowns import rundown
 
 
 class Controller:
@@ -59,10 +60,8 @@ class Controller:
         return None
 
 
-def res(tid: int) -> Any:
-    return SimpleNamespace(tightening_id=tid, pset=1, ok=True, result_type_code=1,
-                           result_type=None, vin="", torque_nm=12.0, angle_deg=30.0,
-                           timestamp=datetime(2026, 11, 29, 8, 0, 0), controller_clock=True)
+def res(tid: int) -> TighteningResult:
+    return rundown(tid, 1, code=1)
 
 
 def catch_up(controller: Controller, last: int | None = 40, comebacks: int = 1,

@@ -23,6 +23,7 @@ from stationd.station.inputs import (
     Started,
     VehicleLoaded,
 )
+from tests.rundowns import rundown
 from tests.station.test_core import BOLTS, PARAMS
 
 
@@ -95,16 +96,13 @@ def test_what_the_core_decided_typed_is_published_in_words(caplog):
 def test_a_controller_event_is_published_and_said_by_its_type_s_name(caplog):
     """A batch increment: the core publishes its type code and no name; the bus and the
     journal read the name the core wrote before ("batch increment")."""
-    from types import SimpleNamespace
 
     from stationd.station.events import ControllerResultEvent
     from stationd.station.inputs import ResultIn
 
     core = StationCore(PARAMS)
     effects = _effects(core)
-    result = SimpleNamespace(tightening_id=3, pset=1, ok=True, result_type_code=3,
-                             result_type=None, vin="", torque_nm=0.0, angle_deg=0.0,
-                             timestamp=None)
+    result = rundown(3, 1, code=3, torque_nm=0.0, angle_deg=0.0)
     with caplog.at_level(logging.INFO, logger="stationd"):
         for ev in (Started(1.0), ResultIn(1.1, result)):
             for a in core.feed(ev):

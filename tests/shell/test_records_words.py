@@ -7,9 +7,7 @@ from __future__ import annotations
 
 import sqlite3
 import time
-from datetime import datetime
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 from db.kinds import NOT_TAKEN
@@ -25,12 +23,11 @@ from stationd.station.actions import (
 from stationd.station.commands import Issuer, SignOut
 from stationd.station.inputs import VehicleLoaded
 from tests.db.conftest import BASE, url_of
+from tests.rundowns import rundown
 
 
 def _result(tid: int, code: int | None) -> Any:
-    return SimpleNamespace(tightening_id=tid, pset=3, ok=True, result_type_code=code,
-                           result_type=None, vin="", torque_nm=12.0, angle_deg=30.0,
-                           timestamp=datetime(2026, 11, 29, 8, 0, 0))
+    return rundown(tid, 3, code=code)
 
 
 def _records(tmp_path: Path) -> Records:

@@ -10,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -88,6 +87,7 @@ from stationd.station.inputs import (
 from stationd.station.matching import MatchParams
 from stationd.station.state import LATE_RESULT_S
 from stationd.words import fault_words, reason_words, state_words, unattributed_words
+from tests.rundowns import rundown
 
 BOLTS = {"B1": LoadedBolt((0.0, 0.0, 0.0), 1), "B2": LoadedBolt((60.0, 0.0, 0.0), 2),
          "B3": LoadedBolt((0.0, 60.0, 5.0), 1)}
@@ -95,7 +95,7 @@ PARAMS = MatchParams(tolerance_mm=8.0, margin_mm=6.0, stable_frames=2, max_age_s
 
 
 def result(tid: int, pset: int, ok: bool = True) -> Any:
-    return SimpleNamespace(tightening_id=tid, pset=pset, ok=ok, vin="")
+    return rundown(tid, pset, ok)
 
 
 @dataclass
@@ -739,7 +739,7 @@ def test_a_resumed_enable_is_a_link_cut_the_catch_up_ends():
     core.resume(Owed(sel, off_at=1000.0, enabled_at=995.0, in_window=False))
     core.feed(Started(1100.0))
     assert core.missed_since() == 995.0
-    fetched = SimpleNamespace(tightening_id=70061, pset=2, ok=True, vin="VIN1")
+    fetched = rundown(70061, 2, vin="VIN1")
     acts = core.feed(ResultIn(1101.0, fetched, fetched=True, follows=70060, made_at=998.0))
     assert [(a.bolt, a.late) for a in acts if isinstance(a, Record)] == [("B2", True)]
     assert not core.feed(CaughtUp(1102.0, complete=True))     # the cut had ended

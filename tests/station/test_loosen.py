@@ -7,7 +7,6 @@ invariants after every event."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -40,6 +39,7 @@ from stationd.station.policy import NokPolicy, NokRule, Strategy
 from stationd.station.results import rundown_kind
 from stationd.station.state import LOOSEN_TARGETS
 from stationd.words import answer_words, reason_words
+from tests.rundowns import rundown
 from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
 from tests.station.test_core import BOLTS, PARAMS, Driver, _on, _ready, published
 
@@ -52,7 +52,7 @@ POLICY = NokPolicy(NokRule(3, Strategy.LOOSEN, 90),
 
 
 def res(tid: int, pset: int, ok: bool, rtype: int | None = None) -> Any:
-    return SimpleNamespace(tightening_id=tid, pset=pset, ok=ok, result_type=rtype, vin="")
+    return rundown(tid, pset, ok, rtype=rtype)
 
 
 def _driver(policy: NokPolicy = POLICY) -> Driver:
@@ -140,7 +140,7 @@ def test_the_result_type_decides_the_kind_else_what_was_sent():
     assert rundown_kind(res(1, 1, True, 2), False) == LOOSENING
     assert rundown_kind(res(1, 1, True, 1), True) == TIGHTENING
     assert rundown_kind(res(1, 1, True), True) == LOOSENING
-    assert rundown_kind(SimpleNamespace(), False) == TIGHTENING
+    assert rundown_kind(rundown(1, 1), False) == TIGHTENING
     d = _driver()
     _, acts = _rundown(d, 2, 1, ok=True, rtype=2)   # reversed by hand: a loosening
     assert [a.kind for a in acts if isinstance(a, Record)] == [LOOSENING]

@@ -6,9 +6,9 @@ the tool was enabled for only when the controller's own data proves it was made 
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import replace
 from datetime import datetime
-from types import SimpleNamespace
 from typing import Any
 
 import pytest
@@ -68,6 +68,7 @@ from stationd.words import (
     unattributed_words,
     worded,
 )
+from tests.rundowns import rundown
 from tests.station.test_commands import OPERATOR, SUPERVISOR, _answer
 from tests.station.test_core import BOLTS, Driver, _kinds, _on, _ready, published
 
@@ -76,9 +77,7 @@ EVENT_TYPES = (3, 4, 5, 6, 8)
 
 def res(tid: int, pset: int, ok: bool = True, code: int | None = None, vin: str = "",
         when: datetime | None = None) -> Any:
-    return SimpleNamespace(tightening_id=tid, pset=pset, ok=ok, result_type_code=code,
-                           result_type=None, vin=vin, torque_nm=12.0, angle_deg=30.0,
-                           timestamp=when or datetime(2026, 11, 29, 8, 0, 0))
+    return rundown(tid, pset, ok, code=code, vin=vin, when=when)
 
 
 def _enabled(d: Driver, bolt: int = 1) -> SendParams:
@@ -794,8 +793,7 @@ def test_a_result_under_an_id_seen_before_with_other_values_is_a_new_result():
     assert [a.bolt for a in d.feed(ResultIn(d.t, first)) if isinstance(a, Record)] == ["B1"]
     assert [type(a).__name__ for a in d.feed(ResultIn(d.t, first))] == ["Acknowledge"]
     sent = _enabled(d, 3)
-    other = SimpleNamespace(**{**vars(first), "torque_nm": 47.5,
-                               "timestamp": datetime(2026, 11, 29, 9, 0, 0)})
+    other = dataclasses.replace(first, torque_nm=47.5, timestamp=datetime(2026, 11, 29, 9))
     acts = d.alone(ResultIn(d.t, other))   # the Driver's check keys records by id alone
     assert [a.bolt for a in acts if isinstance(a, Record)] == ["B3"]
     assert any("ids started again" in m for m in _notices(acts))

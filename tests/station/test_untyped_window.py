@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from dataclasses import replace
 from datetime import datetime
-from types import SimpleNamespace
 from typing import Any
 
 import pytest
@@ -32,6 +31,7 @@ from stationd.station.events import (
 )
 from stationd.station.inputs import DeviceBack, DeviceFault, ResultIn, Tick, VehicleLoaded
 from stationd.words import notice_words, reason_words
+from tests.rundowns import rundown
 from tests.station.test_commands import SUPERVISOR, _answer
 from tests.station.test_core import BOLTS, Driver, _on, _ready, published
 from tests.station.test_result_types import _enabled
@@ -44,9 +44,8 @@ WINDOWED = {k: replace(b, parameters=Parameters(b.pset, Window(22.5, 20.0, 25.0)
 
 def res(tid: int, pset: int, torque: float, ok: bool = True, code: int | None = None,
         unit: TorqueUnit | None = None, when: datetime | None = None) -> Any:
-    return SimpleNamespace(tightening_id=tid, pset=pset, ok=ok, result_type_code=code,
-                           result_type=None, vin="", torque_nm=torque, angle_deg=30.0,
-                           torque_unit=unit, timestamp=when or datetime(2026, 11, 29, 8))
+    return rundown(tid, pset, ok, code=code, torque_nm=torque, unit=unit,
+                   when=when or datetime(2026, 11, 29, 8))
 
 
 def _windowed() -> Driver:
