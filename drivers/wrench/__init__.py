@@ -17,6 +17,7 @@ a station without a serial adapter never imports pyserial.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from drivers.errors import UrlError
@@ -35,7 +36,7 @@ from drivers.wrench.base import (
 )
 
 __all__ = ["BACKENDS", "FORMS", "LinkStatus", "Received", "ResultKind", "ResultType", "Status",
-           "TighteningResult", "TorqueUnit", "UnreadableResult", "Wrench", "open_wrench",
+           "TighteningResult", "TorqueUnit", "UnreadableResult", "Wrench", "fetches", "open_wrench",
            "result_kind", "takes_register_map", "takes_targets", "wrench_class"]
 
 #: scheme -> "module:Class"; the class has ``from_url(url: DeviceUrl, **kw) -> Wrench``.
@@ -67,11 +68,11 @@ def wrench_class(url: str) -> type[Wrench]:
     return backend
 
 
-def _can(url: str, ability: str) -> bool:
-    """The class attribute ``ability`` of ``url``'s backend, asked without building it;
-    False for a URL that does not parse or names no backend (the URL's own check says why)."""
+def _can(url: str, ability: Callable[[type[Wrench]], bool]) -> bool:
+    """What ``ability`` reads of ``url``'s backend class, asked without building it; False
+    for a URL that does not parse or names no backend (the URL's own check says why)."""
     try:
-        return bool(getattr(wrench_class(url), ability))
+        return bool(ability(wrench_class(url)))
     except UrlError:
         return False
 
@@ -79,13 +80,19 @@ def _can(url: str, ability: str) -> bool:
 def takes_targets(url: str) -> bool:
     """Whether the controller at ``url`` takes a bolt's own targets (else psets only): a
     property of its backend (:attr:`Wrench.takes_targets`), asked without opening it."""
-    return _can(url, "takes_targets")
+    return _can(url, lambda backend: backend.takes_targets)
 
 
 def takes_register_map(url: str) -> bool:
     """Whether the controller at ``url`` is driven through a register map the station file
     may give (:attr:`Wrench.takes_register_map`): its backend says, not its scheme's name."""
-    return _can(url, "takes_register_map")
+    return _can(url, lambda backend: backend.takes_register_map)
+
+
+def fetches(url: str) -> bool:
+    """Whether the controller at ``url`` keeps its results for the station to fetch
+    (:attr:`Wrench.can_fetch`), asked without opening it."""
+    return _can(url, lambda backend: backend.can_fetch)
 
 
 def open_wrench(url: str, *, connect: bool = True, **kw: Any) -> Wrench:

@@ -29,11 +29,10 @@ from typing import Any, TypeVar
 
 from db.errors import DbError
 from db.repository import Repository
-from drivers.devices import Kind, backend_class
 from drivers.errors import DeviceError
 from drivers.keeper import DeviceKeeper, FaultKind, one_line
 from drivers.lift import Lift
-from drivers.wrench import Wrench
+from drivers.wrench import Wrench, fetches
 from stationd.bus import EventBus
 from stationd.config import StationConfig
 from stationd.localize import Localization
@@ -215,7 +214,7 @@ class Station:
             self._pending.append(OperatorBack(time.time(), signed[0], signed[1].timestamp()))
         # a controller that keeps no results to fetch: nothing to catch up on after the
         # restart, its result (within the window) only as it is read
-        owed = self.records.owed(self.core.late_result_s, cut=_fetches(self.cfg.wrench.url))
+        owed = self.records.owed(self.core.late_result_s, cut=fetches(self.cfg.wrench.url))
         if owed is not None:   # its result is recorded to that bolt, not into nothing
             self.core.resume(owed)
         for device, keeper in self.keepers.items():
@@ -462,12 +461,3 @@ def _leave_open(repo: Repository) -> None:
 
 
 __all__ = ["Localization", "State", "Station"]
-
-
-def _fetches(url: str) -> bool:
-    """Whether the controller at ``url`` keeps its results for the station to fetch (its
-    driver says: ``Wrench.can_fetch``)."""
-    try:
-        return bool(getattr(backend_class(Kind.WRENCH, url), "can_fetch", False))
-    except (DeviceError, ValueError):
-        return False

@@ -119,6 +119,18 @@ def test_whether_a_controller_takes_targets_is_its_drivers_to_say(url, targets):
     assert set(BACKENDS) >= {"openprotocol", "sim", "modbus-tcp", "sim+modbus"}
 
 
+@pytest.mark.parametrize("url, keeps", [
+    ("openprotocol://127.0.0.1:4545", True), ("openprotocol+serial:///dev/ttyUSB1", True),
+    ("sim://wrench", True), ("modbus-tcp://127.0.0.1:502", False),
+    ("sim+modbus://wrench", False), ("nonsense://x", False), ("not a url", False)])
+def test_whether_a_controller_keeps_its_results_to_fetch_is_its_drivers_to_say(url, keeps):
+    """An Open Protocol controller keeps its results by id (MID 0064): after a link cut the
+    station fetches what was made, a register map has only the newest; nothing opened."""
+    from drivers.wrench import fetches
+
+    assert fetches(url) is keeps
+
+
 def test_every_registered_backend_keeps_the_contract():
     """A backend registered for a scheme is in this suite (a new one must be added here)."""
     from drivers.wrench import BACKENDS
