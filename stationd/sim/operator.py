@@ -38,7 +38,7 @@ from db.repository import BoltInfo
 from drivers.counting import counted
 from drivers.devices import Kind, simulated
 from drivers.lift.sim import SimLift, SimulatedPlc
-from drivers.wrench.base import ResultKind, ResultType, result_kind
+from drivers.wrench.base import ResultKind, ResultType, Status, result_kind
 from drivers.wrench.sim.controller import SimController, SimTightening, SimWrench
 from stationd.config import StationConfig
 from stationd.errors import InputError
@@ -609,9 +609,9 @@ def _rundown_words(shot: SimTightening) -> str:
              None if rec is None else rec.torque_max / 100, ".1f"),
             (angle, shot.angle_status, None if rec is None else rec.angle_min,
              None if rec is None else rec.angle_max, ".0f")):
-        if status == 0:
+        if status == Status.LOW:
             failed.append(words + ("" if lo is None else f" < {lo:{fmt}} min"))
-        elif status == 2:
+        elif status == Status.HIGH:
             failed.append(words + ("" if hi is None else f" > {hi:{fmt}} max"))
         else:
             passed.append(words)
