@@ -41,30 +41,31 @@ class Parser(argparse.ArgumentParser):
     def _command_prog(self) -> str:
         """The prog of the deepest command the command line names (``stationd demo``), where
         an unrecognized option is reported by the top parser (``stationd``)."""
+        return self._command()[0]
+
+    def _command(self) -> tuple[str, argparse.ArgumentParser]:
+        """The deepest command the command line names, as typed (``stationd sim lift``, an
+        alias of ``sim plc``), and its parser; this one where it names none."""
         words = [t for t in Parser.argv if not t.startswith("-")]
-        best = self.prog
-        for p in self._tree():
-            named = p.prog.split()[1:]
-            if named and words[:len(named)] == named and len(p.prog) > len(best):
-                best = p.prog
+        best: tuple[str, argparse.ArgumentParser] = (self.prog, self)
+        depth = 0
+        for path, p in self._paths():
+            if len(path) > depth and words[:len(path)] == path:
+                best, depth = (" ".join([p.prog.split()[0], *path]), p), len(path)
         return best
 
-    def _tree(self) -> list[argparse.ArgumentParser]:
-        """This parser and its subcommands' parsers, theirs too: an option unknown to the
-        one that reports it may be a subcommand's, mistyped.  (Walked from here, not kept in
-        a list of every parser made: that list grew by the whole tree at every build, and
-        each error walked every parser a process, the tests', had ever built.)"""
-        tree: list[argparse.ArgumentParser] = []
-        todo: list[argparse.ArgumentParser] = [self]
+    def _paths(self) -> list[tuple[list[str], argparse.ArgumentParser]]:
+        """Every command under this parser with the words that name it from the top, each
+        alias too (an alias's parser is its command's, its prog the command's name)."""
+        paths: list[tuple[list[str], argparse.ArgumentParser]] = []
+        todo: list[tuple[list[str], argparse.ArgumentParser]] = [(self.prog.split()[1:], self)]
         while todo:
-            p = todo.pop()
-            if any(p is q for q in tree):    # an alias names its command's parser again
-                continue
-            tree.append(p)
+            path, p = todo.pop()
+            paths.append((path, p))
             for action in p._actions:
                 if isinstance(action, argparse._SubParsersAction):
-                    todo.extend(action.choices.values())
-        return tree
+                    todo.extend(([*path, name], sub) for name, sub in action.choices.items())
+        return paths
 
     def _no_such_command(self, message: str) -> str | None:
         """``stationd stauts``: the command it is likely a typo of, not only the choices."""
@@ -93,9 +94,8 @@ class Parser(argparse.ArgumentParser):
         likely a typo of: ``run --confg X`` said only that --config is required."""
         import difflib
 
-        command = self._command_prog()    # its own options, not every command's
-        mine = {o for p in self._tree() if p.prog == command
-                for o in p._option_string_actions if o.startswith("--")}
+        command = self._command()[1]    # its own options, not every command's
+        mine = {o for o in command._option_string_actions if o.startswith("--")}
         known = sorted(mine)
         for token in Parser.argv:
             name = token.split("=", 1)[0]

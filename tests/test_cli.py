@@ -652,6 +652,10 @@ def test_detect_draw_never_writes_through_a_link_or_over_another_file(files, tmp
      "stationd line results: error: unrecognized arguments: --bogus"),
     (["line", "results", "--config", "s.yaml", "--bolts", "B1"],
      "stationd line results: error: no option --bolts (did you mean --bolt?)"),
+    # a command named by its alias is said as typed, its own options suggested
+    (["sim", "lift", "--bogus"], "stationd sim lift: error: unrecognized arguments: --bogus"),
+    (["sim", "lift", "--prot", "3"], "stationd sim lift: error: no option --prot (did you "
+                                     "mean --port?)"),
     (["stauts"], "stationd: error: no command 'stauts' (did you mean status?)"),
     # an option before the command: its value was said to be an invalid command
     (["operator", "--config", "s.yaml"], "stationd operator: error: a command is missing: "
