@@ -15,6 +15,8 @@ import sys
 from typing import Any
 
 from drivers.errors import DeviceError, UrlError
+from drivers.lift import FORMS as LIFT_FORMS
+from drivers.wrench import FORMS as WRENCH_FORMS
 from stationd.jsonout import strict_json
 from stationd.probelock import locked
 
@@ -197,8 +199,7 @@ def add_probe_parser(sub: Any) -> None:
     psub = p.add_subparsers(dest="device", required=True, parser_class=type(p))
     lift = psub.add_parser("lift", aliases=["plc"], help="read the lift PLC once (also: probe "
                                                           "plc)")
-    lift.add_argument("url", help="modbus-tcp://HOST:PORT?unit=N | modbus-rtu:///dev/ttyUSB0?"
-                                  "baud=19200&parity=E&unit=N | sim://lift")
+    lift.add_argument("url", help=LIFT_FORMS)     # the drivers' own list
     lift.add_argument("--config", help="station YAML (its lift register map)")
     lift.add_argument("--timeout", type=seconds, default=2.0, help="seconds (default 2)")
     lift.add_argument("--json", action="store_true", help="print one JSON object")
@@ -206,8 +207,7 @@ def add_probe_parser(sub: Any) -> None:
     w = psub.add_parser("wrench", aliases=["controller"],
                         help="start a session, select a pset, wait for a result (also: probe "
                              "controller)")
-    w.add_argument("url", help="openprotocol://HOST:4545 | openprotocol+serial:///dev/ttyUSB1"
-                               "?baud=9600 | sim://wrench")
+    w.add_argument("url", help=WRENCH_FORMS)
     w.add_argument("--pset", type=int, help="select this pset and wait for the acknowledgement")
     w.add_argument("--wait-result", type=seconds, metavar="SECONDS",
                    help="enable the tool and wait this long for one tightening result")
