@@ -28,6 +28,7 @@ import io
 import os
 import pickle
 import threading
+import time
 from functools import cache
 from pathlib import Path
 
@@ -40,6 +41,10 @@ from stationd.sim import raycast, render
 from stationd.vision import marker
 
 ENV = "STATIOND_SIM_BACKGROUNDS"
+#: how long a camera waits for another process's render of the same image before its own
+#: (a background takes a core a second or two, many more on a loaded machine)
+LOCK_WAIT_S = 30.0
+
 _writers: list[threading.Thread] = []    # the files being written, this process's
 _lock = threading.Lock()
 
@@ -125,19 +130,28 @@ def _read(path: Path) -> np.ndarray | None:
 
 
 def _take(path: Path) -> int | None:
-    """The image's lock (``NAME.lock`` beside it), waited for: held by whoever renders it
-    until its file is there.  None where no lock can be had (the image is rendered anyway)."""
+    """The image's lock (``NAME.lock`` beside it), waited for :data:`LOCK_WAIT_S` at most: held by
+    whoever renders it until its file is there.  None where no lock can be had, or the
+    holder keeps it longer (a process stopped or stuck mid-render): the image is rendered
+    anyway, a camera is never left waiting on another process without end."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd = os.open(path.with_suffix(".lock"), os.O_RDWR | os.O_CREAT, 0o644)
     except OSError:
         return None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
-    except OSError:
-        os.close(fd)
-        return None
-    return fd
+    deadline = time.monotonic() + LOCK_WAIT_S
+    while True:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return fd
+        except BlockingIOError:
+            if time.monotonic() >= deadline:
+                break
+            time.sleep(0.05)
+        except OSError:
+            break
+    os.close(fd)
+    return None
 
 
 def _release(lock: int | None) -> None:

@@ -139,3 +139,26 @@ def test_cameras_asking_at_once_wait_for_one_render(tmp_path, monkeypatch):
     assert len(got) == 3 and len(renders) == 1
     assert all(np.array_equal(g, got[0]) for g in got)
     assert np.array_equal(got[0], real(CAM, SCENE, seed=3).image)
+
+
+def test_a_render_held_too_long_by_another_is_not_waited_for_without_end(tmp_path, monkeypatch):
+    """Another process holds the image's lock and never lets go (stopped or stuck mid-render:
+    a daemon under test once waited 90 s at "opening the devices"): after the bounded wait
+    the camera renders its own, the same image, and keeps it."""
+    import fcntl
+    import os
+
+    monkeypatch.setenv(backgrounds.ENV, str(tmp_path))
+    monkeypatch.setattr(backgrounds, "LOCK_WAIT_S", 0.3)
+    path = tmp_path / f"{backgrounds._key(CAM, SCENE, 4, None)}.npy"
+    holder = os.open(path.with_suffix(".lock"), os.O_RDWR | os.O_CREAT, 0o644)
+    fcntl.flock(holder, fcntl.LOCK_EX)
+    try:
+        t0 = time.monotonic()
+        got = backgrounds.background(CAM, SCENE, 4)
+        assert time.monotonic() - t0 >= 0.3
+        backgrounds.wait_stored()
+    finally:
+        os.close(holder)
+    assert np.array_equal(got, render(CAM, SCENE, seed=4).image)
+    assert _images(tmp_path) == [path]
