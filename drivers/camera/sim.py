@@ -20,26 +20,44 @@ the left and right frames of one stereo grab, so a seeded world renders a reprod
 Its serial number is ``SIM-PAIR-SIDE`` unless the URL's ``serial`` option names another (a
 test's camera replaced by another unit).
 
+Frames come no faster than the camera it stands for delivers them: ``frame_rate`` Hz, by
+default :data:`FRAME_RATE`, the station's 20 MP USB3 camera at full resolution (5472x3648
+8-bit Bayer is 20 MB a frame; USB3 Vision carries about 380 MB/s), or the rate
+``STATIOND_SIM_FRAME_RATE`` names (a camera set to a lower rate: the test suite runs its
+simulated stations at 5 Hz, its tests being about what the station does, not at what
+rate).  A trigger (or a grab without one) earlier than a frame period after the last
+exposure waits for the sensor, as a real camera's trigger does, and the exposure is then.
+Without the cap a station's loop grabs a frame without a marker in a few milliseconds and
+spins at a rate no camera of the station reaches, burning the cores it shares with
+everything else (a daemon tracking an empty scene used two whole cores).
+
     sim://pair1/left?seed=100
     sim://pair1/left?serial=SIM-SPARE-1
+    sim://pair1/left?frame_rate=10
 """
 
 from __future__ import annotations
 
+import os
 import threading
+import time
 from collections.abc import Callable
 from urllib.parse import unquote, urlsplit
 
 import numpy as np
 
-from drivers.camera.base import CameraDevice, Frame
+from drivers.camera.base import CameraDevice, Frame, positive
 from drivers.errors import ConnectError, ProtocolError
 from drivers.url import parse_url
 
 #: ``source(side, seed, at) -> HxWx3 uint8 BGR image`` of the world as of host time ``at``
 WorldSource = Callable[[str, int, float], np.ndarray]
 SIDES = ("left", "right")
-FORM = "sim://PAIR/left|right[?seed=N&serial=TEXT]"
+FORM = "sim://PAIR/left|right[?seed=N&serial=TEXT&frame_rate=HZ]"
+#: frames per second of the station's camera at full resolution (the USB3 link's limit)
+FRAME_RATE = 19.0
+#: the environment variable that sets the default rate of cameras whose URL names none
+RATE_ENV = "STATIOND_SIM_FRAME_RATE"
 
 _worlds: dict[str, WorldSource] = {}
 _lock = threading.Lock()
@@ -72,14 +90,15 @@ def registered_worlds() -> list[str]:
 
 def parse_sim_url(text: str) -> tuple[str, str, int]:
     """(pair, side, seed) of a ``sim://`` URL; the pair keeps its case (hostnames do not)."""
-    pair, side, seed, _ = _parse(text)
+    pair, side, seed, _, _ = _parse(text)
     return pair, side, seed
 
 
-def _parse(text: str) -> tuple[str, str, int, str]:
-    """(pair, side, seed, serial number) of a ``sim://`` URL."""
+def _parse(text: str) -> tuple[str, str, int, str, float]:
+    """(pair, side, seed, serial number, frame rate) of a ``sim://`` URL."""
     url = parse_url(text)
-    opts = url.typed_options({"seed": (int, 0), "serial": (str, "")}, FORM)
+    opts = url.typed_options({"seed": (int, 0), "serial": (str, ""),
+                              "frame_rate": (positive, None)}, FORM)
     parts = urlsplit(text)
     pair = unquote(parts.netloc)
     side = unquote(parts.path).strip("/")
@@ -87,7 +106,24 @@ def _parse(text: str) -> tuple[str, str, int, str]:
         raise url.error(f"expected {FORM}")
     if opts["seed"] < 0:
         raise url.error("option seed must be >= 0")
-    return pair, side, int(opts["seed"]), opts["serial"].strip() or f"SIM-{pair}-{side}"
+    try:
+        rate = opts["frame_rate"] or default_rate()
+    except ValueError as exc:
+        raise url.error(str(exc)) from None
+    return pair, side, int(opts["seed"]), opts["serial"].strip() or f"SIM-{pair}-{side}", rate
+
+
+def default_rate() -> float:
+    """The rate of a camera whose URL names none: ``STATIOND_SIM_FRAME_RATE`` if set (a
+    ValueError naming it when it is not a number > 0), else :data:`FRAME_RATE`."""
+    text = os.environ.get(RATE_ENV, "").strip()
+    if not text:
+        return FRAME_RATE
+    try:
+        return positive(text)
+    except ValueError:
+        raise ValueError(f"{RATE_ENV}={text!r} is not a frame rate (a number of Hz > 0)") \
+            from None
 
 
 class SimCamera(CameraDevice):
@@ -100,8 +136,10 @@ class SimCamera(CameraDevice):
 
     def __init__(self, url: str, *, timeout: float | None = None) -> None:
         super().__init__(url, timeout=timeout)
-        self.pair, self.side, self.seed, self._serial = _parse(url)
+        self.pair, self.side, self.seed, self._serial, rate = _parse(url)
+        self.frame_period_s = 1.0 / rate
         self._count = 0
+        self._next_exposure = 0.0      # time.monotonic() when the sensor takes a trigger again
 
     @classmethod
     def world_view(cls, url: str) -> tuple[str, str] | None:
@@ -119,6 +157,19 @@ class SimCamera(CameraDevice):
 
     def _open(self) -> None:
         self._count = 0
+        self._next_exposure = 0.0
+
+    def _trigger(self) -> None:
+        self._ready()
+        self._triggered_at = time.time()   # the exposure starts once the sensor is ready
+
+    def _ready(self) -> None:
+        """Wait until the sensor can expose again (a frame period after the last exposure
+        started), and count the new exposure."""
+        wait = self._next_exposure - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+        self._next_exposure = time.monotonic() + self.frame_period_s
 
     def _close(self) -> None:
         pass
@@ -134,6 +185,8 @@ class SimCamera(CameraDevice):
             raise ConnectError(f"no simulated world for pair {self.pair!r}{others}; the world "
                                f"must call drivers.camera.sim.register_world({self.pair!r}, "
                                "source) first", device=self.url)
+        if self._triggered_at is None:    # a grab without a trigger exposes now
+            self._ready()
         timestamp = self._take_trigger_time()
         frame_id = self._count
         self._count += 1

@@ -1,5 +1,6 @@
 """``sim://PAIR/SIDE``: the in-process channel between simulated cameras and the world."""
 
+import itertools
 import time
 
 import numpy as np
@@ -7,7 +8,7 @@ import pytest
 
 from drivers.camera import open_camera, sim
 from drivers.camera.base import UnsupportedError
-from drivers.errors import ConnectError, ProtocolError
+from drivers.errors import ConnectError, ProtocolError, UrlError
 from stationd.sim.render import Scene, crop_camera, default_camera, render
 
 AT: list[float] = []
@@ -85,6 +86,40 @@ def test_without_a_trigger_the_grab_is_the_trigger(world):
         t0 = time.time()
         f = cam.grab()
     assert AT == [f.timestamp] and t0 <= f.timestamp <= f.arrival
+
+
+def test_frames_come_no_faster_than_the_frame_rate(world):
+    """Exposures (triggered or not) are a frame period apart at least, the wait before the
+    exposure: a frame's timestamp is still its exposure, and a stereo pair triggered
+    together is still exposed together."""
+    with open_camera("sim://Pair1/left?frame_rate=20") as left, \
+            open_camera("sim://Pair1/right?frame_rate=20") as right:
+        assert left.frame_period_s == pytest.approx(0.05)
+        grabbed = [left.grab() for _ in range(3)]
+        triggered = []
+        for _ in range(3):
+            left.trigger()
+            right.trigger()
+            triggered.append((left.grab(), right.grab()))
+    stamps = [f.timestamp for f in grabbed] + [lf.timestamp for lf, _ in triggered]
+    assert all(b - a >= 0.05 - 1e-3 for a, b in itertools.pairwise(stamps))
+    assert all(abs(lf.timestamp - rf.timestamp) < 0.05 for lf, rf in triggered[1:])
+    assert AT == [f.timestamp for f in grabbed] + [
+        t for lf, rf in triggered for t in (lf.timestamp, rf.timestamp)]
+
+
+def test_the_frame_rate_by_default_and_from_the_environment(monkeypatch):
+    monkeypatch.delenv(sim.RATE_ENV, raising=False)
+    assert sim.SimCamera("sim://p/left").frame_period_s == pytest.approx(1 / sim.FRAME_RATE)
+    monkeypatch.setenv(sim.RATE_ENV, "4")
+    assert sim.SimCamera("sim://p/left").frame_period_s == pytest.approx(0.25)
+    assert sim.SimCamera("sim://p/left?frame_rate=8").frame_period_s == pytest.approx(0.125)
+    monkeypatch.setenv(sim.RATE_ENV, "fast")
+    with pytest.raises(UrlError, match=r"STATIOND_SIM_FRAME_RATE='fast' is not a frame rate"):
+        sim.SimCamera("sim://p/left")
+    for bad in ("0", "-3", "nan"):
+        with pytest.raises(UrlError, match=rf"option frame_rate='{bad}' is not valid"):
+            sim.SimCamera(f"sim://p/left?frame_rate={bad}")
 
 
 def test_a_world_that_returns_no_image_is_a_protocol_error():
