@@ -84,22 +84,38 @@ def _mm(v: float | None) -> str:
 LOCK_RELEASE = "a supervisor releases it"
 
 
-def _locked(bolt: str | None, count: int | None) -> str:
-    """A bolt locked by its NOKs: the refusal and the notice say it alike."""
-    return f"{bolt} locked after {count} NOK in a row: {LOCK_RELEASE}"
+def _locked(bolt: str | None, count: int | None, instruct: bool = True) -> str:
+    """A bolt locked by its NOKs: the refusal and the notice say it alike; ``instruct``
+    False leaves out who ends it (:func:`stopped_words`)."""
+    said = f"{bolt} locked after {count} NOK in a row"
+    return f"{said}: {LOCK_RELEASE}" if instruct else said
 
 
-def _unread(bolt: str | None, note: str | None) -> str:
+def stopped_words(bolt: str, count: int | None, note: str | None, *,
+                  instruct: bool = True) -> str:
+    """A bolt stopped for a person: locked by ``count`` NOKs in a row, held for a result not
+    known (``note``), or both, said together (a release or an entered outcome ends both).
+    ``instruct`` False: without what to do after each, for the screens' panel of locks that
+    says it once below them (a new user's trial at 1280x800: three locks' whole words pushed
+    the commands below the screen)."""
+    locked = "" if count is None else _locked(bolt, count, instruct)
+    held = "" if note is None else _unread(bolt, note, instruct)
+    return "; ".join(w for w in (locked, held) if w)
+
+
+def _unread(bolt: str | None, note: str | None, instruct: bool = True) -> str:
     """A bolt held for a result that could not be read, or for one never in hand (a link
     cut's, a lost push's: "could not be read" was wrong there, a supervisor's trial), or for
     one read and not taken (a type the station does not know, another pset's: an
     integrator's trial read "could not be read" there too): the refusal and the notice
     alike."""
     if is_not_taken_note(note):
-        return f"{bolt}: {note}: not taken as a tightening; {CHECK_ON_CONTROLLER}"
-    if is_unknown_note(note):
-        return f"{bolt}: {note}: {CHECK_ON_CONTROLLER}"
-    return f"{bolt}: the controller's result could not be read ({note}): {CHECK_ON_CONTROLLER}"
+        said, sep = f"{bolt}: {note}: not taken as a tightening", ";"
+    elif is_unknown_note(note):
+        said, sep = f"{bolt}: {note}", ":"
+    else:
+        said, sep = f"{bolt}: the controller's result could not be read ({note})", ":"
+    return f"{said}{sep} {CHECK_ON_CONTROLLER}" if instruct else said
 
 
 def _command(user: str | None, comment: str | None) -> str:

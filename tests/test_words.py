@@ -744,3 +744,23 @@ def test_a_check_s_hold_says_why_and_its_release_warns_the_bolt_may_be_tightened
         ": B2 is open to be tightened again, but it may be tightened already (a push lost, "
         "the controller's newest result not read): check the controller before tightening "
         "it again")
+
+
+@pytest.mark.parametrize("note", [None, "tightening 21", not_taken_note(3.0, 7),
+                                  unknown_type_note(11, 8)])
+@pytest.mark.parametrize("count", [None, 3])
+def test_a_stopped_bolt_is_said_with_what_to_do_or_without_for_the_panel(count, note):
+    """A lock and a hold said together, each as its reason says it alone; for the screens'
+    panel of locks the same words without what to do after each (said once below them)."""
+    from stationd.reasons import Reason, Why
+    from stationd.words import CHECK_ON_CONTROLLER, LOCK_RELEASE, reason_words, stopped_words
+
+    whole = stopped_words("B2", count, note)
+    parts = ([] if count is None else [reason_words(Reason(Why.LOCKED, bolt="B2", count=count))]) \
+        + ([] if note is None else [reason_words(Reason(Why.HELD, bolt="B2", note=note))])
+    assert whole == "; ".join(parts)
+    short = stopped_words("B2", count, note, instruct=False)
+    assert CHECK_ON_CONTROLLER not in short and LOCK_RELEASE not in short
+    assert short == whole.replace(f": {CHECK_ON_CONTROLLER}", "").replace(
+        f"; {CHECK_ON_CONTROLLER}", "").replace(f": {LOCK_RELEASE}", "")
+    assert (note is None or note in short) and (count is None or "3 NOK in a row" in short)

@@ -59,12 +59,11 @@ from stationd.station.events import (
 from stationd.station.inputs import DATABASE
 from stationd.station.state import LOCALIZING, ON_A_BOLT, CoreStatus
 from stationd.words import (
-    CHECK_ON_CONTROLLER,
-    LOCK_RELEASE,
     check_words,
     fault_words,
     reason_words,
     state_words,
+    stopped_words,
 )
 
 
@@ -156,6 +155,9 @@ class BoltState:
     loosen_pset: int | None = None   # that loosen pset, as the station said it
     nok_count: int = 0          # NOKs in a row when it locked
     held: bool = False          # its result could not be read: an outcome entered, or a release
+    #: the core's words of its lock and hold (NOKs in a row, the hold's note), None for none
+    lock_count: int | None = None
+    held_note: str | None = None
     #: its last rundown a NOK, as the vehicle's report says it (a release, a skip, a lock do
     #: not change it; the next rundown does, and a person's loosen command)
     ends_nok: bool = False
@@ -417,6 +419,7 @@ class View:
         was = b.state, b.status, b.locked, b.held, b.nok_count
         b.locked, b.held = v.locked is not None or v.held is not None, v.held is not None
         b.nok_count, b.check_first = v.locked or 0, v.check_first
+        b.lock_count, b.held_note = v.locked, v.held
         b.loosen, b.ends_nok, b.ran = v.status == TO_LOOSEN, v.last_nok, v.ran
         if v.loosen_pset is not None:
             b.loosen_pset = v.loosen_pset
@@ -636,7 +639,8 @@ class View:
         (the panel says it once, below them: enter the outcome or release, and who may), the
         whole words its hover title (a new user's trial at 1280x800: three locks' full words
         pushed the commands below the screen)."""
-        return [{"text": _for_locks_panel(text), "title": text} for text in self.locks()]
+        return [{"text": stopped_words(b.bolt, b.lock_count, b.held_note, instruct=False),
+                 "title": b.reason} for b in self.bolts.values() if b.state == Shown.LOCKED]
 
     def holds(self) -> list[str]:
         """Of :meth:`locks`, the bolts held (a result not known: an unreadable one, a link
@@ -817,25 +821,14 @@ def _state_words(b: BoltState, v: BoltView) -> str:
     """The words of bolt ``b`` drawn anew as the core holds it (``v``): its lock or hold,
     the loosening it waits for, a check first, or its last rundown's."""
     if b.state == Shown.LOCKED:
-        held = reason_words(Reason(Why.HELD, bolt=v.bolt, note=v.held)) \
-            if v.held is not None else ""
-        locked = reason_words(Reason(Why.LOCKED, bolt=v.bolt, count=v.locked)) \
-            if v.locked is not None else ""
         # a lock of NOKs on a held bolt keeps the hold (its result is still not known), said
         # with it: the hold's outcome entered, or a release, ends both
-        return "; ".join(w for w in (locked, held) if w)
+        return stopped_words(v.bolt, v.locked, v.held)
     if b.state == TO_LOOSEN:
         return reason_words(Reason(Why.LOOSEN_FIRST, bolt=v.bolt, pset=v.loosen_pset))
     if b.check_first and b.state in (PENDING, Shown.NEXT):
         return CHECK_FIRST_WORDS
     return RUNDOWN_WORDS.get(b.state, "")
-
-
-def _for_locks_panel(text: str) -> str:
-    """A lock's or a hold's words without the instruction after each (:meth:`View.lock_lines`)."""
-    for tail in (f": {CHECK_ON_CONTROLLER}", f"; {CHECK_ON_CONTROLLER}", f": {LOCK_RELEASE}"):
-        text = text.replace(tail, "")
-    return text
 
 
 def _failed(e: ResultRecorded) -> str | None:
