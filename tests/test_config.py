@@ -319,7 +319,7 @@ def test_a_missing_to_vehicle_file_is_a_warning_not_an_error(sim_copy):
      "shows pair 'pair9', which the simulated world does not have (it renders this file's "
      "pairs: pair1, pair2, pair3, pair4): write sim://pair1/left"),
     ("url: 'sim://pair1/left'", "url: 'sim://pair1/left?sed=1'", "cameras.pair1_left.url",
-     "unknown option sed (accepted: seed"),
+     "unknown option sed (accepted: frame_rate, seed, serial;"),
     ("lift: {url: 'sim://lift'}", "lift: {url: 'openprotocol://10.0.0.9:4545'}", "lift.url",
      "unknown lift scheme 'openprotocol' (openprotocol:// is a tightening controller's URL "
      "(wrench.url), not a lift's)"),

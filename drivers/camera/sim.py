@@ -24,7 +24,7 @@ Frames come no faster than the camera it stands for delivers them: ``frame_rate`
 default :data:`FRAME_RATE`, the station's 20 MP USB3 camera at full resolution (5472x3648
 8-bit Bayer is 20 MB a frame; USB3 Vision carries about 380 MB/s), or the rate
 ``STATIOND_SIM_FRAME_RATE`` names (a camera set to a lower rate: the test suite runs its
-simulated stations at 5 Hz, its tests being about what the station does, not at what
+simulated stations at 10 Hz, its tests being about what the station does, not at what
 rate).  A trigger (or a grab without one) earlier than a frame period after the last
 exposure waits for the sensor, as a real camera's trigger does, and the exposure is then.
 Without the cap a station's loop grabs a frame without a marker in a few milliseconds and
